@@ -1,0 +1,553 @@
+// The "udp" link kind: UDP/IPv4 on an Ethernet segment (the paper's
+// "Ethernet" row of Table 1). Unicast goes to one IP:PORT; broadcast_addr fans
+// out to the configured broadcast address and to every configured peer, which
+// is how modules find each other on a segment (broadcast) or on loopback
+// (peers list).
+
+#include <ifaddrs.h>
+#include <net/if.h>
+#include <poll.h>
+#include <pthread.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <climits>
+#include <cstring>
+#include <mutex>
+#include <optional>
+#include <shared_mutex>
+#include <system_error>
+#include <thread>
+#include <vector>
+
+#include "actors/runtime/error.hpp"
+#include "channels/drivers/udp_addr.hpp"
+#include "channels/link_driver.hpp"
+#include "channels/options.hpp"
+
+namespace herm {
+
+namespace {
+
+/// IPv4 (20) and UDP (8) headers inside a 1500-byte Ethernet payload.
+constexpr uint32_t default_udp_mtu = 1500 - 20 - 8;
+
+/// Datagrams drained per recvmmsg call at most.
+constexpr size_t max_batch = 32;
+
+/// Upper bound of the preallocated receive memory (batch * MTU) in bytes.
+constexpr size_t max_rx_memory = size_t{1} << 20;
+
+std::string errno_text(int err) {
+  char buf[256];
+  // GNU strerror_r: returns a pointer to the text (maybe not into buf).
+  return strerror_r(err, buf, sizeof(buf));
+}
+
+/// Errors a UDP socket reports for something a peer or the path did (ICMP
+/// unreachable, a signal); the socket itself is fine.
+bool is_transient(int err) {
+  switch (err) {
+    case EINTR:
+    case EAGAIN:
+#if EAGAIN != EWOULDBLOCK
+    case EWOULDBLOCK:
+#endif
+    case ECONNREFUSED:
+    case EHOSTUNREACH:
+    case ENETUNREACH:
+    case EHOSTDOWN:
+      return true;
+    default:
+      return false;
+  }
+}
+
+/// Owns a descriptor until released.
+class unique_fd {
+public:
+  explicit unique_fd(int fd = -1) : fd_(fd) {
+  }
+  unique_fd(const unique_fd&) = delete;
+  unique_fd& operator=(const unique_fd&) = delete;
+  ~unique_fd() {
+    if (fd_ >= 0)
+      ::close(fd_);
+  }
+  int get() const {
+    return fd_;
+  }
+  int release() {
+    auto fd = fd_;
+    fd_ = -1;
+    return fd;
+  }
+
+private:
+  int fd_;
+};
+
+struct udp_settings {
+  std::string device;
+  link_profile profile;
+  link_addr bind_addr = 0;
+  std::vector<link_addr> peers;
+  std::optional<link_addr> broadcast;
+};
+
+class udp_driver final : public link_driver {
+public:
+  /// Takes ownership of `fd` (bound socket) and `wake_fd` (eventfd).
+  udp_driver(udp_settings cfg, int fd, int wake_fd, link_addr local)
+    : cfg_(std::move(cfg)), local_(local), fd_(fd), wake_fd_(wake_fd) {
+  }
+
+  /// Must not run on the receive thread (i.e. the handler must not drop the
+  /// last reference to its driver).
+  ~udp_driver() override {
+    stop();
+  }
+
+  caf::error start(std::shared_ptr<frame_handler> handler) override {
+    std::lock_guard<std::mutex> guard{life_mtx_};
+    if (state_ != state::opened)
+      return fail(ec::device_unavailable, state_ == state::running
+                                            ? "already started"
+                                            : "already stopped");
+    if (!handler)
+      return fail(ec::invalid_parameter, "start needs a frame handler");
+    if (auto err = collect_own_ips())
+      return err;
+    auto mtu = size_t{cfg_.profile.mtu};
+    batch_ = std::clamp<size_t>(max_rx_memory / mtu, 1, max_batch);
+    buffers_.assign(batch_ * mtu, 0);
+    msgs_.assign(batch_, mmsghdr{});
+    iovs_.assign(batch_, iovec{});
+    names_.assign(batch_, sockaddr_in{});
+    for (size_t i = 0; i < batch_; ++i) {
+      iovs_[i].iov_base = buffers_.data() + i * mtu;
+      iovs_[i].iov_len = mtu;
+      msgs_[i].msg_hdr.msg_iov = &iovs_[i];
+      msgs_[i].msg_hdr.msg_iovlen = 1;
+      msgs_[i].msg_hdr.msg_name = &names_[i];
+    }
+    handler_ = std::move(handler);
+    try {
+      thread_ = std::thread{[this] { run(); }};
+    } catch (const std::system_error& ex) {
+      handler_.reset();
+      return fail(ec::device_unavailable,
+                  std::string{"cannot start the receive thread: "} + ex.what());
+    }
+    state_ = state::running;
+    return caf::none;
+  }
+
+  void stop() override {
+    std::lock_guard<std::mutex> guard{life_mtx_};
+    if (state_ == state::stopped)
+      return;
+    stopping_ = true;
+    if (thread_.joinable()) {
+      if (thread_.get_id() == std::this_thread::get_id())
+        return; // Called from a handler: the loop ends after this callback.
+      uint64_t one = 1;
+      // An eventfd write of 1 cannot fail short of overflow.
+      [[maybe_unused]] auto res = ::write(wake_fd_, &one, sizeof(one));
+      thread_.join();
+    }
+    handler_.reset();
+    {
+      std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
+      ::close(fd_);
+      fd_ = -1;
+    }
+    ::close(wake_fd_);
+    wake_fd_ = -1;
+    state_ = state::stopped;
+  }
+
+  caf::error send(link_addr dst, const uint8_t* data, size_t size,
+                  uint8_t) override {
+    if (size > cfg_.profile.mtu)
+      return fail(ec::packet_too_large,
+                  "frame of " + std::to_string(size)
+                    + " bytes exceeds the MTU of "
+                    + std::to_string(cfg_.profile.mtu) + " bytes");
+    if (size == 0)
+      return fail(ec::invalid_parameter,
+                  "refusing to send an empty frame (receivers drop it)");
+    std::shared_lock<std::shared_mutex> guard{fd_mtx_};
+    if (fd_ < 0)
+      return fail(ec::device_failed, "device is stopped");
+    if (dst != broadcast_addr) {
+      if (dst > udp::max_addr || udp::port_of(dst) == 0)
+        return fail(ec::invalid_address,
+                    "not a udp destination: " + udp::format_addr(dst));
+      return send_to(dst, data, size);
+    }
+    // Every target gets its copy even when one fails; the first error wins.
+    caf::error first;
+    if (cfg_.broadcast)
+      first = send_to(*cfg_.broadcast, data, size);
+    for (auto peer : cfg_.peers) {
+      auto err = send_to(peer, data, size);
+      if (err && !first)
+        first = std::move(err);
+    }
+    return first;
+  }
+
+  const link_profile& profile() const override {
+    return cfg_.profile;
+  }
+
+  link_addr local_addr() const override {
+    return local_;
+  }
+
+  std::string format_addr(link_addr addr) const override {
+    return udp::format_addr(addr);
+  }
+
+  caf::expected<link_addr> parse_addr(const std::string& str) const override {
+    if (auto addr = udp::parse_addr(str, false))
+      return *addr;
+    return fail(ec::invalid_address,
+                "'" + str + "' is not an IPv4 address and port (A.B.C.D:PORT)");
+  }
+
+  caf::expected<std::string> get_param(const std::string& key) const override {
+    if (key == "local")
+      return udp::format_addr(local_);
+    if (key == "peers") {
+      std::string result;
+      for (auto peer : cfg_.peers)
+        result += (result.empty() ? "" : ",") + udp::format_addr(peer);
+      return result;
+    }
+    if (key == "broadcast")
+      return cfg_.broadcast ? udp::format_addr(*cfg_.broadcast) : "";
+    return link_driver::get_param(key);
+  }
+
+private:
+  enum class state { opened, running, stopped };
+
+  caf::error fail(ec code, const std::string& what) const {
+    return make_error(code, "device '" + cfg_.device + "': " + what);
+  }
+
+  // Called with fd_mtx_ held (shared).
+  caf::error send_to(link_addr dst, const uint8_t* data, size_t size) {
+    auto sa = udp::to_sockaddr(dst);
+    auto res = ::sendto(fd_, data, size, MSG_DONTWAIT | MSG_NOSIGNAL,
+                        reinterpret_cast<const sockaddr*>(&sa), sizeof(sa));
+    if (res >= 0)
+      return caf::none;
+    auto err = errno;
+    auto where = " to " + udp::format_addr(dst) + ": " + errno_text(err);
+    switch (err) {
+      case EAGAIN:
+#if EAGAIN != EWOULDBLOCK
+      case EWOULDBLOCK:
+#endif
+      case ENOBUFS:
+        return fail(ec::queue_full, "send queue full" + where);
+      case EMSGSIZE:
+        return fail(ec::packet_too_large, "datagram too large" + where);
+      default:
+        return fail(ec::device_failed, "sendto failed" + where);
+    }
+  }
+
+  /// Snapshots this host's (network namespace's) IPv4 addresses, so that our
+  /// own broadcasts, which the kernel loops back, can be recognised.
+  caf::error collect_own_ips() {
+    own_ips_.clear();
+    ifaddrs* list = nullptr;
+    if (::getifaddrs(&list) != 0)
+      return fail(ec::device_unavailable,
+                  "getifaddrs failed: " + errno_text(errno));
+    for (auto* i = list; i != nullptr; i = i->ifa_next)
+      if (i->ifa_addr != nullptr && i->ifa_addr->sa_family == AF_INET) {
+        auto* sa = reinterpret_cast<const sockaddr_in*>(i->ifa_addr);
+        own_ips_.push_back(ntohl(sa->sin_addr.s_addr));
+      }
+    ::freeifaddrs(list);
+    // Binding to e.g. 127.0.0.2 works without that address being listed.
+    if (udp::ip_of(local_) != INADDR_ANY)
+      own_ips_.push_back(udp::ip_of(local_));
+    return caf::none;
+  }
+
+  bool is_own(const sockaddr_in& src) const {
+    if (ntohs(src.sin_port) != udp::port_of(local_))
+      return false;
+    auto ip = ntohl(src.sin_addr.s_addr);
+    return std::find(own_ips_.begin(), own_ips_.end(), ip) != own_ips_.end();
+  }
+
+  void report_failure(const std::string& what, int err) {
+    handler_->on_failure(
+      fail(ec::device_failed, what + " on " + udp::format_addr(local_) + ": "
+                                + errno_text(err)));
+  }
+
+  // -- receive thread ----------------------------------------------------------
+
+  void run() {
+    pthread_setname_np(pthread_self(), "herm-udp");
+    pollfd fds[2];
+    fds[0] = pollfd{fd_, POLLIN, 0};
+    fds[1] = pollfd{wake_fd_, POLLIN, 0};
+    while (!stopping_) {
+      if (::poll(fds, 2, -1) < 0) {
+        if (errno == EINTR)
+          continue;
+        report_failure("poll failed", errno);
+        return;
+      }
+      if (fds[1].revents != 0)
+        return;
+      auto ev = fds[0].revents;
+      if ((ev & POLLNVAL) != 0) {
+        report_failure("socket became invalid", EBADF);
+        return;
+      }
+      if ((ev & POLLERR) != 0) {
+        // A pending socket error (reading SO_ERROR clears it).
+        int err = 0;
+        socklen_t len = sizeof(err);
+        if (::getsockopt(fd_, SOL_SOCKET, SO_ERROR, &err, &len) != 0)
+          err = errno;
+        if (err != 0 && !is_transient(err)) {
+          report_failure("socket error", err);
+          return;
+        }
+      }
+      if ((ev & POLLIN) != 0 && !drain())
+        return;
+    }
+  }
+
+  /// Reads until the socket is empty. Returns false after a fatal error.
+  bool drain() {
+    auto mtu = cfg_.profile.mtu;
+    while (!stopping_) {
+      for (size_t i = 0; i < batch_; ++i) {
+        msgs_[i].msg_hdr.msg_namelen = sizeof(sockaddr_in);
+        msgs_[i].msg_hdr.msg_flags = 0;
+        msgs_[i].msg_len = 0;
+      }
+      // MSG_TRUNC: msg_len is the datagram's real length even when larger
+      // than the buffer, which is how oversized datagrams are recognised.
+      auto n = ::recvmmsg(fd_, msgs_.data(), static_cast<unsigned>(batch_),
+                          MSG_DONTWAIT | MSG_TRUNC, nullptr);
+      if (n < 0) {
+        auto err = errno;
+        if (err == EAGAIN || err == EWOULDBLOCK)
+          return true;
+        if (is_transient(err))
+          continue;
+        report_failure("recvmmsg failed", err);
+        return false;
+      }
+      for (int i = 0; i < n && !stopping_; ++i) {
+        auto& msg = msgs_[static_cast<size_t>(i)];
+        auto& name = names_[static_cast<size_t>(i)];
+        if (is_own(name))
+          continue;
+        auto src = udp::from_sockaddr(name);
+        if (msg.msg_len == 0)
+          handler_->on_malformed(src, "empty");
+        else if (msg.msg_len > mtu || (msg.msg_hdr.msg_flags & MSG_TRUNC) != 0)
+          handler_->on_malformed(src, "oversized");
+        else
+          handler_->on_frame(src,
+                             static_cast<const uint8_t*>(
+                               msg.msg_hdr.msg_iov->iov_base),
+                             msg.msg_len);
+      }
+      if (static_cast<size_t>(n) < batch_)
+        return true;
+    }
+    return true;
+  }
+
+  // -- state -------------------------------------------------------------------
+
+  const udp_settings cfg_;
+  const link_addr local_;
+
+  /// Guards closing fd_ against concurrent send() calls.
+  mutable std::shared_mutex fd_mtx_;
+  int fd_;
+  int wake_fd_;
+
+  /// Serialises start() and stop().
+  std::mutex life_mtx_;
+  state state_ = state::opened;
+  std::atomic<bool> stopping_{false};
+  std::thread thread_;
+  std::shared_ptr<frame_handler> handler_;
+
+  // Owned by the receive thread once started.
+  std::vector<uint32_t> own_ips_;
+  size_t batch_ = 0;
+  std::vector<uint8_t> buffers_;
+  std::vector<mmsghdr> msgs_;
+  std::vector<iovec> iovs_;
+  std::vector<sockaddr_in> names_;
+};
+
+// -- open ----------------------------------------------------------------------
+
+caf::expected<std::vector<link_addr>> parse_peers(option_reader& opts) {
+  std::vector<link_addr> result;
+  auto text = opts.str("peers");
+  if (text.empty())
+    return result;
+  size_t pos = 0;
+  for (;;) {
+    auto comma = text.find(',', pos);
+    auto item = text.substr(pos, comma == std::string::npos ? std::string::npos
+                                                           : comma - pos);
+    auto first = item.find_first_not_of(" \t");
+    auto last = item.find_last_not_of(" \t");
+    item = first == std::string::npos ? "" : item.substr(first, last - first + 1);
+    auto addr = udp::parse_addr(item, false);
+    if (!addr)
+      return opts.fail(ec::invalid_address,
+                       "option 'peers': '" + item
+                         + "' is not an IPv4 address and port (A.B.C.D:PORT) "
+                           "in '"
+                         + text + "'");
+    if (std::find(result.begin(), result.end(), *addr) == result.end())
+      result.push_back(*addr);
+    if (comma == std::string::npos)
+      return result;
+    pos = comma + 1;
+  }
+}
+
+caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
+  option_reader opts{cfg};
+  auto fail = [&](ec code, const std::string& what) {
+    return opts.fail(code, what);
+  };
+  udp_settings set;
+  set.device = cfg.name;
+  auto prof = opts.profile("ethernet");
+  if (!prof)
+    return prof.error();
+  set.profile = std::move(*prof);
+  // Without an explicit mtu, a frame must fit one Ethernet frame's UDP
+  // payload (a smaller profile MTU, e.g. can2.0 emulated over UDP, stays).
+  if (!opts.has("mtu"))
+    set.profile.mtu = std::min(set.profile.mtu, default_udp_mtu);
+  auto bind_addr = udp::parse_addr(cfg.interface, true);
+  if (!bind_addr)
+    return fail(ec::invalid_address,
+                "interface '" + cfg.interface
+                  + "' is not an IPv4 address and port to bind "
+                    "(e.g. 0.0.0.0:47000 or 127.0.0.1:0)");
+  set.bind_addr = *bind_addr;
+  auto peers = parse_peers(opts);
+  if (!peers)
+    return peers.error();
+  set.peers = std::move(*peers);
+  if (opts.has("broadcast")) {
+    auto text = opts.str("broadcast");
+    auto addr = udp::parse_addr(text, false);
+    if (!addr)
+      return fail(ec::invalid_address,
+                  "option 'broadcast': '" + text
+                    + "' is not an IPv4 address and port "
+                      "(e.g. 10.77.0.255:47000)");
+    set.broadcast = *addr;
+  }
+  auto bind_device = opts.str("bind_device");
+  if (opts.has("bind_device")
+      && (bind_device.empty() || bind_device.size() >= IFNAMSIZ))
+    return fail(ec::invalid_parameter,
+                "option 'bind_device' expects an interface name of 1 to "
+                  + std::to_string(IFNAMSIZ - 1) + " characters, got '"
+                  + bind_device + "'");
+  std::optional<uint64_t> bufs[2];
+  const char* buf_keys[2] = {"rcvbuf", "sndbuf"};
+  for (int i = 0; i < 2; ++i)
+    if (opts.has(buf_keys[i])) {
+      auto val = opts.u64(buf_keys[i], 0, 1024, INT_MAX / 2);
+      if (!val)
+        return val.error();
+      bufs[i] = *val;
+    }
+  if (auto err = opts.finish())
+    return err;
+  // -- socket --
+  unique_fd sock{::socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC,
+                          0)};
+  if (sock.get() < 0)
+    return fail(ec::device_unavailable,
+                "cannot create a UDP socket: " + errno_text(errno));
+  int one = 1;
+  if (set.broadcast
+      && ::setsockopt(sock.get(), SOL_SOCKET, SO_BROADCAST, &one, sizeof(one))
+           != 0)
+    return fail(ec::device_unavailable,
+                "cannot enable SO_BROADCAST: " + errno_text(errno));
+  if (!bind_device.empty()
+      && ::setsockopt(sock.get(), SOL_SOCKET, SO_BINDTODEVICE,
+                      bind_device.c_str(),
+                      static_cast<socklen_t>(bind_device.size()))
+           != 0)
+    return fail(ec::device_unavailable, "cannot bind to interface '"
+                                          + bind_device
+                                          + "': " + errno_text(errno));
+  const int buf_opts[2] = {SO_RCVBUF, SO_SNDBUF};
+  for (int i = 0; i < 2; ++i)
+    if (bufs[i]) {
+      auto val = static_cast<int>(*bufs[i]);
+      if (::setsockopt(sock.get(), SOL_SOCKET, buf_opts[i], &val, sizeof(val))
+          != 0)
+        return fail(ec::device_unavailable, std::string{"cannot set "}
+                                              + buf_keys[i] + ": "
+                                              + errno_text(errno));
+    }
+  auto sa = udp::to_sockaddr(set.bind_addr);
+  if (::bind(sock.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof(sa))
+      != 0)
+    return fail(ec::device_unavailable, "cannot bind "
+                                          + udp::format_addr(set.bind_addr)
+                                          + ": " + errno_text(errno));
+  sockaddr_in bound{};
+  socklen_t len = sizeof(bound);
+  if (::getsockname(sock.get(), reinterpret_cast<sockaddr*>(&bound), &len)
+      != 0)
+    return fail(ec::device_unavailable, "getsockname failed: "
+                                          + errno_text(errno));
+  unique_fd wake{::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)};
+  if (wake.get() < 0)
+    return fail(ec::device_unavailable,
+                "cannot create an eventfd: " + errno_text(errno));
+  auto local = udp::from_sockaddr(bound);
+  auto drv = std::make_shared<udp_driver>(std::move(set), sock.get(),
+                                          wake.get(), local);
+  sock.release();
+  wake.release();
+  return link_driver_ptr{std::move(drv)};
+}
+
+} // namespace
+
+const link_kind& udp_link_kind() {
+  static const link_kind kind{"udp", "UDP/IPv4 (Ethernet)", open_udp};
+  return kind;
+}
+
+} // namespace herm

@@ -1,0 +1,50 @@
+#include "channels/link_driver.hpp"
+
+#include "actors/runtime/error.hpp"
+#include "channels/options.hpp"
+
+namespace herm {
+
+#define HERM_LINK_KIND(x) const link_kind& x##_link_kind();
+#include "channels/link_kinds.def"
+#undef HERM_LINK_KIND
+
+frame_handler::~frame_handler() = default;
+
+link_driver::~link_driver() = default;
+
+caf::error link_driver::set_param(const std::string& key, const std::string&) {
+  return make_error(ec::invalid_parameter,
+                    "parameter '" + key + "' cannot be changed on this link");
+}
+
+caf::expected<std::string> link_driver::get_param(const std::string& key) const {
+  auto& p = profile();
+  if (key == "bandwidth")
+    return std::to_string(p.bandwidth_bps);
+  if (key == "mtu")
+    return std::to_string(p.mtu);
+  if (key == "delay_coef")
+    return format_double(p.delay_coef);
+  if (key == "profile")
+    return p.name;
+  return make_error(ec::invalid_parameter, "unknown parameter '" + key + "'");
+}
+
+const std::vector<const link_kind*>& link_kinds() {
+  static const std::vector<const link_kind*> kinds{
+#define HERM_LINK_KIND(x) &x##_link_kind(),
+#include "channels/link_kinds.def"
+#undef HERM_LINK_KIND
+  };
+  return kinds;
+}
+
+const link_kind* find_link_kind(const std::string& name) {
+  for (auto* k : link_kinds())
+    if (name == k->name)
+      return k;
+  return nullptr;
+}
+
+} // namespace herm

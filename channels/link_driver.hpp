@@ -1,0 +1,110 @@
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "caf/error.hpp"
+#include "caf/expected.hpp"
+
+#include "channels/link_profile.hpp"
+#include "channels/messages.hpp"
+
+namespace herm {
+
+/// Receives what a driver hears.
+///
+/// Threading: a driver calls these from its own receive thread (descriptor
+/// based kinds) or from the thread of the actor that sent the frame (the
+/// in-process kind). Implementations must be thread-safe and must not block.
+class frame_handler {
+public:
+  virtual ~frame_handler();
+
+  /// One frame of at most MTU bytes from `src`. `data` is valid only during
+  /// the call.
+  virtual void on_frame(link_addr src, const uint8_t* data, size_t size) = 0;
+
+  /// A frame the driver itself could not accept (oversized, truncated, bad
+  /// medium header). It is dropped; the handler counts it.
+  virtual void on_malformed(link_addr src, const char* why) = 0;
+
+  /// Something else happened on the link (error frame, bus-off, ...).
+  virtual void on_event(link_event_kind kind, link_addr peer,
+                        std::string detail) = 0;
+
+  /// The device failed for good. Called at most once; no call follows it.
+  virtual void on_failure(caf::error reason) = 0;
+};
+
+/// The narrow interface between a channel and a physical (or emulated)
+/// interface: it moves frames of at most MTU bytes and does nothing else. One
+/// driver per device; all channels on that device share it.
+///
+/// Lifetime: created by a link kind's `open`, then `start`ed once, then
+/// `stop`ped once (also from the destructor).
+class link_driver {
+public:
+  virtual ~link_driver();
+
+  /// Starts delivering received frames to `handler`.
+  virtual caf::error start(std::shared_ptr<frame_handler> handler) = 0;
+
+  /// Stops receiving and joins any thread of the driver. Idempotent. No
+  /// handler call happens after it returns.
+  virtual void stop() = 0;
+
+  /// Sends one frame of at most `profile().mtu` bytes to `dst`, or to every
+  /// peer for `broadcast_addr`. Thread-safe. Never blocks longer than one
+  /// system call on a non-blocking descriptor. Errors: ec::packet_too_large,
+  /// ec::queue_full, ec::invalid_address, ec::device_failed.
+  virtual caf::error send(link_addr dst, const uint8_t* data, size_t size,
+                          uint8_t priority)
+    = 0;
+
+  /// The link's characteristics (bandwidth, MTU, multi-access, cost).
+  virtual const link_profile& profile() const = 0;
+
+  /// This station's own address on the link.
+  virtual link_addr local_addr() const = 0;
+
+  /// Formats a link address in the kind's notation ("10.0.0.2:47000").
+  virtual std::string format_addr(link_addr addr) const = 0;
+
+  /// Parses a link address in the kind's notation; ec::invalid_address with
+  /// the offending text on failure.
+  virtual caf::expected<link_addr> parse_addr(const std::string& str) const
+    = 0;
+
+  /// Changes a link parameter at run time (the paper's "control"). Default:
+  /// ec::invalid_parameter naming the key.
+  virtual caf::error set_param(const std::string& key,
+                               const std::string& value);
+
+  /// Reads a link parameter. Default: "bandwidth", "mtu", "delay_coef" from
+  /// the profile, ec::invalid_parameter otherwise.
+  virtual caf::expected<std::string> get_param(const std::string& key) const;
+};
+
+using link_driver_ptr = std::shared_ptr<link_driver>;
+
+/// A link kind: the factory that opens drivers for devices of that kind (the
+/// paper's abstract factory). Each kind lives in one file under
+/// channels/drivers/ and is registered by one line in link_kinds.def.
+struct link_kind {
+  /// Name used in device_config::kind, e.g. "udp".
+  const char* name;
+  /// One line for people.
+  const char* description;
+  /// Opens the device. Errors name the device and what was wrong.
+  caf::expected<link_driver_ptr> (*open)(const device_config& cfg);
+};
+
+/// Returns the link kind with that name, or nullptr.
+const link_kind* find_link_kind(const std::string& name);
+
+/// Every compiled-in link kind.
+const std::vector<const link_kind*>& link_kinds();
+
+} // namespace herm

@@ -1,0 +1,136 @@
+#include "channels/options.hpp"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include "actors/runtime/error.hpp"
+
+namespace herm {
+
+option_reader::option_reader(const device_config& cfg) : cfg_(cfg) {
+  // Options every kind understands; reading them is optional.
+}
+
+bool option_reader::has(const std::string& key) {
+  used_.insert(key);
+  return cfg_.options.count(key) > 0;
+}
+
+std::string option_reader::str(const std::string& key, std::string fallback) {
+  used_.insert(key);
+  auto i = cfg_.options.find(key);
+  return i == cfg_.options.end() ? fallback : i->second;
+}
+
+caf::error option_reader::fail(ec code, const std::string& what) const {
+  return make_error(code, "device '" + cfg_.name + "': " + what);
+}
+
+caf::expected<uint64_t> option_reader::u64(const std::string& key,
+                                           uint64_t fallback, uint64_t min,
+                                           uint64_t max) {
+  used_.insert(key);
+  auto i = cfg_.options.find(key);
+  if (i == cfg_.options.end())
+    return fallback;
+  auto& text = i->second;
+  errno = 0;
+  char* end = nullptr;
+  auto val = text.empty() || text[0] == '-'
+               ? 0ull
+               : std::strtoull(text.c_str(), &end, 10);
+  if (text.empty() || text[0] == '-' || errno != 0 || *end != '\0' || val < min
+      || val > max)
+    return fail(ec::invalid_parameter,
+                "option '" + key + "' expects an integer in [" +
+                  std::to_string(min) + ", " + std::to_string(max) +
+                  "], got '" + text + "'");
+  return val;
+}
+
+caf::expected<double> option_reader::real(const std::string& key,
+                                          double fallback, double min,
+                                          double max) {
+  used_.insert(key);
+  auto i = cfg_.options.find(key);
+  if (i == cfg_.options.end())
+    return fallback;
+  auto& text = i->second;
+  errno = 0;
+  char* end = nullptr;
+  auto val = std::strtod(text.c_str(), &end);
+  if (text.empty() || errno != 0 || *end != '\0' || !std::isfinite(val)
+      || val < min || val > max)
+    return fail(ec::invalid_parameter,
+                "option '" + key + "' expects a number in [" +
+                  format_double(min) + ", " + format_double(max) +
+                  "], got '" + text + "'");
+  return val;
+}
+
+caf::expected<bool> option_reader::flag(const std::string& key,
+                                        bool fallback) {
+  used_.insert(key);
+  auto i = cfg_.options.find(key);
+  if (i == cfg_.options.end())
+    return fallback;
+  auto& t = i->second;
+  if (t == "true" || t == "1" || t == "yes" || t == "on")
+    return true;
+  if (t == "false" || t == "0" || t == "no" || t == "off")
+    return false;
+  return fail(ec::invalid_parameter,
+              "option '" + key + "' expects true or false, got '" + t + "'");
+}
+
+caf::expected<link_profile>
+option_reader::profile(const std::string& default_profile) {
+  auto name = str("profile", default_profile);
+  auto* base = find_profile(name);
+  if (base == nullptr) {
+    std::string known;
+    for (auto& p : builtin_profiles())
+      known += (known.empty() ? "" : ", ") + p.name;
+    return fail(ec::invalid_parameter, "option 'profile': unknown profile '"
+                                         + name + "' (known: " + known + ")");
+  }
+  auto result = *base;
+  auto bw = u64("bandwidth", result.bandwidth_bps, 1, 100'000'000'000ull);
+  if (!bw)
+    return bw.error();
+  auto mtu = u64("mtu", result.mtu, 1, 65'507);
+  if (!mtu)
+    return mtu.error();
+  auto coef = real("delay_coef", result.delay_coef, 0.001, 1000.0);
+  if (!coef)
+    return coef.error();
+  auto ovh = u64("frame_overhead_bits", result.frame_overhead_bits, 0, 1u << 16);
+  if (!ovh)
+    return ovh.error();
+  result.bandwidth_bps = *bw;
+  result.mtu = static_cast<uint32_t>(*mtu);
+  result.delay_coef = *coef;
+  result.frame_overhead_bits = static_cast<uint32_t>(*ovh);
+  return result;
+}
+
+caf::error option_reader::finish() const {
+  std::string unknown;
+  for (auto& kv : cfg_.options)
+    if (used_.count(kv.first) == 0)
+      unknown += (unknown.empty() ? "'" : ", '") + kv.first + "'";
+  if (unknown.empty())
+    return caf::none;
+  return fail(ec::invalid_parameter, "unknown option(s) " + unknown + " for link kind '"
+                                       + cfg_.kind + "'");
+}
+
+std::string format_double(double x) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), "%.6g", x);
+  return buf;
+}
+
+} // namespace herm

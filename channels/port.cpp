@@ -1,0 +1,150 @@
+#include "channels/port.hpp"
+
+#include "actors/runtime/error.hpp"
+
+namespace herm {
+
+// -- packet_port ---------------------------------------------------------------
+
+packet_port::~packet_port() = default;
+
+size_t packet_port::expire(time_point) {
+  return 0;
+}
+
+std::optional<packet_port::time_point> packet_port::next_deadline() const {
+  return std::nullopt;
+}
+
+void packet_port::add_stats(channel_stats&) const {
+  // nop
+}
+
+// -- frame_port ----------------------------------------------------------------
+
+frame_port::frame_port(link_driver_ptr driver) : driver_(std::move(driver)) {
+  // nop
+}
+
+uint32_t frame_port::max_packet() const {
+  return driver_->profile().mtu;
+}
+
+caf::expected<size_t> frame_port::send(link_addr dst, uint8_t priority,
+                                       const uint8_t* data, size_t size) {
+  if (size > driver_->profile().mtu)
+    return make_error(ec::packet_too_large,
+                      std::to_string(size) + " bytes exceed the MTU of "
+                        + std::to_string(driver_->profile().mtu));
+  if (auto err = driver_->send(dst, data, size, priority))
+    return err;
+  return size_t{1};
+}
+
+packet_port::rx frame_port::receive(link_addr, const uint8_t* data,
+                                    size_t size, time_point, byte_buffer& out) {
+  out.assign(data, data + size);
+  return rx::packet;
+}
+
+// -- fragmenting_port ------------------------------------------------------------
+
+fragmenting_port::fragmenting_port(std::unique_ptr<packet_port> inner,
+                                   uint32_t inner_mtu,
+                                   reassembly_limits limits)
+  : inner_(std::move(inner)),
+    fragmenter_(inner_mtu),
+    reassembler_(limits) {
+  // nop
+}
+
+uint32_t fragmenting_port::max_packet() const {
+  return static_cast<uint32_t>(reassembler_.limits().max_packet);
+}
+
+caf::expected<size_t> fragmenting_port::send(link_addr dst, uint8_t priority,
+                                             const uint8_t* data,
+                                             size_t size) {
+  if (size > reassembler_.limits().max_packet)
+    return make_error(ec::packet_too_large,
+                      std::to_string(size) + " bytes exceed the channel's "
+                        "maximum packet of "
+                        + std::to_string(reassembler_.limits().max_packet));
+  size_t frames = 0;
+  caf::error err;
+  fragmenter_.split(data, size, [&](const uint8_t* frame, size_t len) {
+    if (err)
+      return;
+    auto res = inner_->send(dst, priority, frame, len);
+    if (res)
+      frames += *res;
+    else
+      err = std::move(res.error());
+  });
+  if (err)
+    return err;
+  return frames;
+}
+
+packet_port::rx fragmenting_port::receive(link_addr src, const uint8_t* data,
+                                          size_t size, time_point now,
+                                          byte_buffer& out) {
+  switch (inner_->receive(src, data, size, now, frame_)) {
+    case rx::packet:
+      break;
+    case rx::pending:
+      return rx::pending;
+    case rx::dropped:
+      return rx::dropped;
+  }
+  switch (reassembler_.push(src, frame_.data(), frame_.size(), now, out)) {
+    case reassembler::result::complete:
+      return rx::packet;
+    case reassembler::result::pending:
+      return rx::pending;
+    case reassembler::result::dropped:
+      break;
+  }
+  return rx::dropped;
+}
+
+size_t fragmenting_port::expire(time_point now) {
+  return reassembler_.expire(now) + inner_->expire(now);
+}
+
+std::optional<packet_port::time_point>
+fragmenting_port::next_deadline() const {
+  auto mine = reassembler_.next_deadline();
+  auto theirs = inner_->next_deadline();
+  if (mine && theirs)
+    return std::min(*mine, *theirs);
+  return mine ? mine : theirs;
+}
+
+void fragmenting_port::add_stats(channel_stats& st) const {
+  inner_->add_stats(st);
+  auto& rs = reassembler_.stats();
+  st.rx_malformed += rs.malformed;
+  st.rx_duplicates += rs.duplicates + rs.orphans;
+  st.rx_reassembly_dropped += rs.timed_out + rs.over_limit + rs.bad_checksum
+                              + rs.superseded;
+}
+
+// -- factory -------------------------------------------------------------------
+
+caf::expected<std::unique_ptr<packet_port>>
+make_port(link_driver_ptr driver, reassembly_limits limits) {
+  auto mtu = driver->profile().mtu;
+  std::unique_ptr<packet_port> port = std::make_unique<frame_port>(driver);
+  if (mtu >= limits.max_packet)
+    return port;
+  if (mtu < min_fragment_mtu)
+    return make_error(ec::invalid_parameter,
+                      "an MTU of " + std::to_string(mtu)
+                        + " bytes is below the smallest fragmentable MTU ("
+                        + std::to_string(min_fragment_mtu) + ")");
+  return std::unique_ptr<packet_port>{
+    std::make_unique<fragmenting_port>(std::move(port), mtu, limits)};
+}
+
+} // namespace herm

@@ -1,0 +1,109 @@
+#pragma once
+
+// Packet ports: how a channel turns packets into frames on its driver and
+// back. `frame_port` sends each packet as one frame; `fragmenting_port` is
+// the paper's decorator: it wraps another port and splits packets larger
+// than the link MTU into fragments (channels/fragmentation.hpp). Plain
+// classes, no actors: the channel actor owns one port stack.
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+
+#include "caf/error.hpp"
+
+#include "channels/fragmentation.hpp"
+#include "channels/link_driver.hpp"
+#include "channels/messages.hpp"
+
+namespace herm {
+
+class packet_port {
+public:
+  using time_point = std::chrono::steady_clock::time_point;
+
+  virtual ~packet_port();
+
+  /// Largest packet `send` accepts, bytes.
+  virtual uint32_t max_packet() const = 0;
+
+  /// Sends one packet. Returns the number of frames put on the link or
+  /// ec::packet_too_large / the driver's error. On error, no further
+  /// frames of that packet are sent.
+  virtual caf::expected<size_t> send(link_addr dst, uint8_t priority,
+                                     const uint8_t* data, size_t size)
+    = 0;
+
+  enum class rx { packet, pending, dropped };
+
+  /// Feeds one received frame. On rx::packet, `out` holds the packet.
+  virtual rx receive(link_addr src, const uint8_t* data, size_t size,
+                     time_point now, byte_buffer& out)
+    = 0;
+
+  /// Drops what has waited too long; returns how many packets were dropped.
+  virtual size_t expire(time_point now);
+
+  /// When `expire` next has something to do.
+  virtual std::optional<time_point> next_deadline() const;
+
+  /// Adds the port's receive-side drop counters to `st`.
+  virtual void add_stats(channel_stats& st) const;
+};
+
+/// One packet per frame; packets above the MTU are refused.
+class frame_port : public packet_port {
+public:
+  explicit frame_port(link_driver_ptr driver);
+
+  uint32_t max_packet() const override;
+
+  caf::expected<size_t> send(link_addr dst, uint8_t priority,
+                             const uint8_t* data, size_t size) override;
+
+  rx receive(link_addr src, const uint8_t* data, size_t size, time_point now,
+             byte_buffer& out) override;
+
+private:
+  link_driver_ptr driver_;
+};
+
+/// Decorator: fragments packets for the wrapped port's MTU and reassembles.
+class fragmenting_port : public packet_port {
+public:
+  fragmenting_port(std::unique_ptr<packet_port> inner, uint32_t inner_mtu,
+                   reassembly_limits limits);
+
+  uint32_t max_packet() const override;
+
+  caf::expected<size_t> send(link_addr dst, uint8_t priority,
+                             const uint8_t* data, size_t size) override;
+
+  rx receive(link_addr src, const uint8_t* data, size_t size, time_point now,
+             byte_buffer& out) override;
+
+  size_t expire(time_point now) override;
+
+  std::optional<time_point> next_deadline() const override;
+
+  void add_stats(channel_stats& st) const override;
+
+  const reassembler& reassembly() const noexcept {
+    return reassembler_;
+  }
+
+private:
+  std::unique_ptr<packet_port> inner_;
+  fragmenter fragmenter_;
+  reassembler reassembler_;
+  byte_buffer frame_;
+};
+
+/// Builds the port stack for a driver: a frame_port, decorated with a
+/// fragmenting_port when the MTU is smaller than `limits.max_packet`.
+/// Errors: ec::invalid_parameter when the MTU is too small to fragment.
+caf::expected<std::unique_ptr<packet_port>>
+make_port(link_driver_ptr driver, reassembly_limits limits);
+
+} // namespace herm
