@@ -1,6 +1,7 @@
 #include "channels/channel.hpp"
 
 #include <algorithm>
+#include <deque>
 #include <set>
 #include <vector>
 
@@ -21,6 +22,16 @@ namespace {
 /// At most this many peers are remembered for channel_info::peers.
 constexpr size_t max_known_peers = 1024;
 
+/// Bound on frames waiting while the driver's transmit queue is full.
+constexpr size_t max_backlog_bytes = 1024 * 1024;
+
+/// A frame waiting for room in the driver's transmit queue.
+struct pending_frame {
+  link_addr dst;
+  uint8_t priority;
+  byte_buffer bytes;
+};
+
 struct channel_state {
   static inline const char* name = "herm.channel";
 
@@ -34,6 +45,26 @@ struct channel_state {
   channel_stats stats;
   byte_buffer rx_buf;
   bool tick_pending = false;
+  /// Frames the driver refused with queue_full, in order. While not empty,
+  /// new frames queue behind them so that fragments never overtake.
+  std::deque<pending_frame> backlog;
+  size_t backlog_bytes = 0;
+  bool flush_pending = false;
+  /// How long to wait before retrying a full driver queue.
+  caf::timespan flush_delay{std::chrono::milliseconds(1)};
+
+  /// The frame_writer of this channel's port stack.
+  caf::error write_frame(link_addr dst, uint8_t prio, const uint8_t* data,
+                         size_t size) {
+    if (backlog.empty()) {
+      auto err = driver->send(dst, data, size, prio);
+      if (!is(err, ec::queue_full))
+        return err;
+    }
+    backlog.push_back(pending_frame{dst, prio, byte_buffer(data, data + size)});
+    backlog_bytes += size;
+    return caf::none;
+  }
 };
 
 using channel_impl = channel_actor::stateful_pointer<channel_state>;
@@ -67,6 +98,31 @@ void schedule_tick(channel_impl self) {
                      atom::tick_v);
 }
 
+void schedule_flush(channel_impl self) {
+  auto& st = self->state;
+  if (st.flush_pending || st.backlog.empty())
+    return;
+  st.flush_pending = true;
+  self->delayed_send(self, st.flush_delay, atom::tick_v);
+}
+
+/// Hands backlogged frames to the driver until its queue is full again.
+void flush(channel_impl self) {
+  auto& st = self->state;
+  while (!st.backlog.empty()) {
+    auto& f = st.backlog.front();
+    auto err = st.driver->send(f.dst, f.bytes.data(), f.bytes.size(),
+                               f.priority);
+    if (is(err, ec::queue_full))
+      break;
+    if (err)
+      ++st.stats.tx_dropped;
+    st.backlog_bytes -= f.bytes.size();
+    st.backlog.pop_front();
+  }
+  schedule_flush(self);
+}
+
 void publish(channel_impl self, link_event ev) {
   ev.channel = self->state.info.id;
   for (auto& r : self->state.readers)
@@ -85,14 +141,23 @@ channel_info current_info(channel_impl self) {
 channel_actor::behavior_type channel_fun(channel_impl self,
                                          channel_setup setup,
                                          std::unique_ptr<packet_port>* port) {
-  auto& st = self->state;
-  st.info = std::move(setup.info);
-  st.driver = std::move(setup.driver);
-  st.counters = std::move(setup.counters);
-  st.peer = setup.peer;
-  st.port = std::move(*port);
-  st.info.max_packet = st.port->max_packet();
-  st.stats.id = st.info.id;
+  auto& init = self->state;
+  init.info = std::move(setup.info);
+  init.driver = std::move(setup.driver);
+  init.counters = std::move(setup.counters);
+  init.peer = setup.peer;
+  init.port = std::move(*port);
+  init.info.max_packet = init.port->max_packet();
+  {
+    // Retry a full driver queue after about 16 frame times, 1 to 20 ms.
+    auto& p = init.driver->profile();
+    auto frame_ns = (uint64_t{p.mtu} * 8 + p.frame_overhead_bits) * 1'000'000'000ull
+                    / std::max<uint64_t>(p.bandwidth_bps, 1);
+    auto delay = std::chrono::nanoseconds(frame_ns * 16);
+    init.flush_delay = std::clamp<caf::timespan>(delay, std::chrono::milliseconds(1),
+                                               std::chrono::milliseconds(20));
+  }
+  init.stats.id = init.info.id;
   // The channel ends with its device.
   self->monitor(setup.device);
   self->set_down_handler([self](caf::down_msg& msg) {
@@ -112,6 +177,16 @@ channel_actor::behavior_type channel_fun(channel_impl self,
     [self](write_packet& msg) {
       auto& st = self->state;
       auto dst = st.peer == broadcast_addr ? msg.dst : st.peer;
+      if (!st.backlog.empty()) {
+        // Drop the whole packet rather than part of it when the backlog
+        // cannot take it.
+        auto frames = st.port->frames_for(msg.bytes.size());
+        auto need = msg.bytes.size() + frames * 2;
+        if (st.backlog_bytes + need > max_backlog_bytes) {
+          ++st.stats.tx_dropped;
+          return;
+        }
+      }
       auto res = st.port->send(dst, msg.priority, msg.bytes.data(),
                                msg.bytes.size());
       if (!res) {
@@ -121,6 +196,7 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       ++st.stats.tx_packets;
       st.stats.tx_bytes += msg.bytes.size();
       st.stats.tx_frames += *res;
+      schedule_flush(self);
     },
     [self](atom::subscribe, channel_reader_actor& reader) -> channel_info {
       auto& readers = self->state.readers;
@@ -197,10 +273,14 @@ channel_actor::behavior_type channel_fun(channel_impl self,
     },
     [self](link_event& ev) { publish(self, std::move(ev)); },
     [self](atom::tick) {
+      // Both the reassembly timer and the backlog timer send tick; doing
+      // both jobs on either is harmless.
       auto& st = self->state;
       st.tick_pending = false;
+      st.flush_pending = false;
       st.port->expire(self->clock().now());
       schedule_tick(self);
+      flush(self);
     },
   };
 }
@@ -208,13 +288,17 @@ channel_actor::behavior_type channel_fun(channel_impl self,
 } // namespace
 
 channel_actor spawn_channel(caf::actor_system& sys, channel_setup setup) {
-  auto port = make_port(setup.driver, setup.limits);
-  // make_port fails only for MTUs below 8, which the device refuses before.
-  auto ptr = std::move(*port);
-  return sys.spawn(
-    [setup = std::move(setup), ptr = std::move(ptr)](channel_impl self) mutable {
-      return channel_fun(self, std::move(setup), &ptr);
-    });
+  return sys.spawn([setup = std::move(setup)](channel_impl self) mutable {
+    auto* st = &self->state;
+    auto writer = [st](link_addr dst, uint8_t prio, const uint8_t* data,
+                       size_t size) {
+      return st->write_frame(dst, prio, data, size);
+    };
+    // make_port fails only for MTUs below 8, which the device refuses.
+    auto port = make_port(setup.driver, setup.limits, writer);
+    auto ptr = std::move(*port);
+    return channel_fun(self, std::move(setup), &ptr);
+  });
 }
 
 } // namespace herm

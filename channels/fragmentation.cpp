@@ -1,1 +1,810 @@
-// PLACEHOLDER
+#include "channels/fragmentation.hpp"
+
+#include <algorithm>
+#include <string_view>
+#include <unordered_map>
+#include <array>
+#include <cassert>
+#include <cstring>
+#include <vector>
+
+#include <zlib.h>
+
+namespace herm {
+
+namespace {
+
+// -- wire format -----------------------------------------------------------------
+
+constexpr uint8_t type_single = 0;
+constexpr uint8_t type_first = 1;
+constexpr uint8_t type_narrow = 2;
+constexpr uint8_t type_wide = 3;
+
+/// Bit 3 of a first fragment's header: the packet uses wide sequence numbers.
+constexpr uint8_t first_wide_flag = 0x08;
+
+constexpr uint32_t crc_size = 4;
+
+/// A length field longer than this is malformed, which caps what can be
+/// fragmented at 2^21 - 1 bytes.
+constexpr size_t max_length_field = 3;
+constexpr size_t max_announced_length = (size_t{1} << (7 * max_length_field)) - 1;
+
+constexpr uint32_t narrow_modulus = 16;
+constexpr uint32_t wide_modulus = 4096;
+
+constexpr uint8_t header(uint8_t type, uint8_t tag) {
+  return static_cast<uint8_t>(type << 6 | (tag & 0x03) << 4);
+}
+
+size_t length_field_size(size_t length) {
+  return length < 0x80 ? 1 : length < 0x4000 ? 2 : 3;
+}
+
+/// Writes `length` as minimal unsigned LEB128 and returns the bytes written.
+/// @pre length <= max_announced_length
+size_t encode_length(size_t length, uint8_t* out) {
+  size_t n = 0;
+  do {
+    auto byte = static_cast<uint8_t>(length & 0x7f);
+    length >>= 7;
+    out[n++] = length != 0 ? static_cast<uint8_t>(byte | 0x80) : byte;
+  } while (length != 0);
+  return n;
+}
+
+struct length_field {
+  size_t value;
+  size_t size;
+};
+
+/// Reads an LEB128 length of at most three bytes from `[data, data + size)`.
+/// Non-minimal encodings (0x81 0x00 for 1) are accepted: the value is still
+/// unambiguous. Fails when the field runs past the frame or past three bytes.
+std::optional<length_field> decode_length(const uint8_t* data, size_t size) {
+  size_t value = 0;
+  for (size_t i = 0; i < max_length_field && i < size; ++i) {
+    value |= size_t{static_cast<uint8_t>(data[i] & 0x7f)} << (7 * i);
+    if ((data[i] & 0x80) == 0)
+      return length_field{value, i + 1};
+  }
+  return std::nullopt;
+}
+
+uint32_t crc_of(const uint8_t* data, size_t size) {
+  // size <= max_announced_length, so the narrowing to uInt is exact.
+  return static_cast<uint32_t>(
+    crc32(0L, size == 0 ? Z_NULL : data, static_cast<uInt>(size)));
+}
+
+void store_le32(uint32_t x, uint8_t* out) {
+  for (int i = 0; i < 4; ++i)
+    out[i] = static_cast<uint8_t>(x >> (8 * i));
+}
+
+uint32_t load_le32(const uint8_t* in) {
+  return uint32_t{in[0]} | uint32_t{in[1]} << 8 | uint32_t{in[2]} << 16
+         | uint32_t{in[3]} << 24;
+}
+
+/// How a fragmented packet is cut: the first frame carries `first_data`
+/// stream bytes after its header and length field, every other frame
+/// `chunk` bytes after its sequence header, the last one what remains.
+struct cut {
+  size_t first_data;
+  size_t chunk;
+  bool wide;
+};
+
+cut cut_for(uint32_t mtu, size_t size) {
+  bool wide = mtu >= wide_fragment_mtu;
+  return {mtu - 1 - length_field_size(size), mtu - (wide ? 2u : 1u), wide};
+}
+
+} // namespace
+
+// -- fragmenter ------------------------------------------------------------------
+
+fragmenter::fragmenter(uint32_t mtu) : mtu_(std::max(mtu, min_fragment_mtu)) {
+  // Below the minimum the first frame could not carry its header, length
+  // and a byte of data; release builds clamp instead of misbehaving.
+  assert(mtu >= min_fragment_mtu);
+}
+
+size_t fragmenter::frames_for(size_t size) const noexcept {
+  if (size < mtu_)
+    return 1;
+  if (size > max_announced_length)
+    return 0; // the length field cannot announce it: split emits nothing
+  auto c = cut_for(mtu_, size);
+  auto rest = size + crc_size - c.first_data;
+  return 1 + (rest + c.chunk - 1) / c.chunk;
+}
+
+void fragmenter::split(const uint8_t* data, size_t size,
+                       const std::function<void(const uint8_t*, size_t)>& emit) {
+  auto tag = next_tag_;
+  if (size < mtu_) {
+    if (scratch_.size() < size + 1)
+      scratch_.resize(size + 1);
+    next_tag_ = (next_tag_ + 1) & 0x03;
+    scratch_[0] = header(type_single, tag);
+    if (size > 0)
+      std::memcpy(scratch_.data() + 1, data, size);
+    emit(scratch_.data(), size + 1);
+    return;
+  }
+  if (size > max_announced_length)
+    return;
+  next_tag_ = (next_tag_ + 1) & 0x03;
+  if (scratch_.size() < mtu_)
+    scratch_.resize(mtu_);
+  uint8_t crc[crc_size];
+  store_le32(crc_of(data, size), crc);
+  // Copies stream bytes [offset, offset + n) of payload || crc to `out`.
+  auto copy_stream = [&](size_t offset, size_t n, uint8_t* out) {
+    if (offset < size) {
+      auto from_payload = std::min(n, size - offset);
+      std::memcpy(out, data + offset, from_payload);
+      out += from_payload;
+      n -= from_payload;
+      offset += from_payload;
+    }
+    std::memcpy(out, crc + (offset - size), n);
+  };
+  auto c = cut_for(mtu_, size);
+  auto stream = size + crc_size;
+  auto* frame = scratch_.data();
+  frame[0] = static_cast<uint8_t>(header(type_first, tag)
+                                  | (c.wide ? first_wide_flag : 0));
+  auto len = encode_length(size, frame + 1);
+  copy_stream(0, c.first_data, frame + 1 + len);
+  emit(frame, mtu_);
+  size_t index = 1;
+  for (size_t offset = c.first_data; offset < stream; offset += c.chunk) {
+    auto n = std::min(c.chunk, stream - offset);
+    size_t hdr;
+    if (c.wide) {
+      auto seq = index % wide_modulus;
+      frame[0] = static_cast<uint8_t>(header(type_wide, tag) | seq >> 8);
+      frame[1] = static_cast<uint8_t>(seq & 0xff);
+      hdr = 2;
+    } else {
+      frame[0] = static_cast<uint8_t>(header(type_narrow, tag) | index % narrow_modulus);
+      hdr = 1;
+    }
+    copy_stream(offset, n, frame + hdr);
+    emit(frame, hdr + n);
+    ++index;
+  }
+}
+
+// -- reassembler state -----------------------------------------------------------
+
+namespace {
+
+using time_point = reassembler::time_point;
+
+/// One packet being reassembled. Its only heap block is `buf`: the stream
+/// (payload || CRC-32) followed by a bitmap of the frames that arrived, so a
+/// packet costs exactly one allocation.
+struct packet {
+  byte_buffer buf;
+  time_point deadline;
+  size_t charge = 0;        // bytes counted against the limits
+  uint32_t length = 0;      // payload bytes
+  uint32_t first_data = 0;  // stream bytes in frame 0
+  uint32_t chunk = 0;       // stream bytes in frames 1 .. frames - 2
+  uint32_t frames = 0;
+  uint32_t received = 0;
+  uint32_t lowest_missing = 0;
+  bool wide = false;
+
+  uint32_t stream_size() const noexcept {
+    return length + crc_size;
+  }
+
+  bool has(uint32_t i) const noexcept {
+    return (buf[stream_size() + i / 8] >> (i % 8)) & 1;
+  }
+
+  void mark(uint32_t i) noexcept {
+    buf[stream_size() + i / 8] |= static_cast<uint8_t>(1u << (i % 8));
+  }
+
+  size_t offset_of(uint32_t i) const noexcept {
+    return i == 0 ? 0 : first_data + size_t{i - 1} * chunk;
+  }
+
+  size_t size_of(uint32_t i) const noexcept {
+    return i == 0 ? first_data
+                  : std::min<size_t>(chunk, stream_size() - offset_of(i));
+  }
+};
+
+/// A consecutive fragment that matched no packet (yet): usually one that
+/// overtook its first fragment.
+struct stash_entry {
+  byte_buffer bytes; // stream bytes, header stripped
+  time_point deadline;
+  size_t charge;
+  uint64_t order; // arrival order over all senders, for evicting the oldest
+  uint16_t seq;
+  uint8_t tag;
+  bool wide;
+};
+
+struct sender_state {
+  std::array<std::optional<packet>, 4> packets; // by tag
+  std::vector<stash_entry> stash;               // in arrival order
+  size_t packet_bytes = 0;
+  size_t stash_bytes = 0;
+  size_t packet_count = 0;
+
+  bool empty() const noexcept {
+    return packet_count == 0 && stash.empty();
+  }
+};
+
+/// Saturating `start + timeout + 1 tick`: the first instant at which a
+/// packet started at `start` is older than the timeout.
+time_point deadline_after(time_point start, std::chrono::milliseconds timeout) {
+  using duration = time_point::duration;
+  constexpr auto longest = std::chrono::duration_cast<std::chrono::milliseconds>(
+    duration::max() - duration{1});
+  duration wait = timeout <= timeout.zero() ? duration::zero()
+                  : timeout >= longest
+                    ? duration::max() - duration{1}
+                    : std::chrono::duration_cast<duration>(timeout);
+  wait += duration{1};
+  if (start > time_point::max() - wait)
+    return time_point::max();
+  return start + wait;
+}
+
+enum class placement { placed, duplicate, misfit };
+
+/// Puts a consecutive fragment into the unique frame index congruent to `seq`
+/// in [lowest_missing, lowest_missing + modulus). A fragment that lands past
+/// the last frame or whose size differs from that frame's is a misfit: it
+/// belongs to some other packet.
+placement place(packet& p, uint32_t seq, const uint8_t* bytes, size_t size) {
+  auto modulus = p.wide ? wide_modulus : narrow_modulus;
+  auto low = p.lowest_missing;
+  auto index = low + (seq + modulus - low % modulus) % modulus;
+  // A copy of a frame that arrived moments ago maps one modulus ahead of the
+  // original (the window has moved past it). Recognise it by its bytes so
+  // that a repeated frame costs nothing instead of the whole packet.
+  if (index >= modulus) {
+    auto prev = index - modulus;
+    if (prev < p.frames && p.has(prev) && size == p.size_of(prev)
+        && (index >= p.frames || !p.has(index))
+        && std::memcmp(p.buf.data() + p.offset_of(prev), bytes, size) == 0)
+      return placement::duplicate;
+  }
+  if (index >= p.frames || size != p.size_of(index))
+    return placement::misfit;
+  if (p.has(index))
+    return placement::duplicate;
+  std::memcpy(p.buf.data() + p.offset_of(index), bytes, size);
+  p.mark(index);
+  ++p.received;
+  while (p.lowest_missing < p.frames && p.has(p.lowest_missing))
+    ++p.lowest_missing;
+  return placement::placed;
+}
+
+} // namespace
+
+// -- reassembler -----------------------------------------------------------------
+
+struct reassembler::impl {
+  using sender_map = std::map<link_addr, sender_state>;
+  using sender_iter = sender_map::iterator;
+
+  /// Charged for every sender holding something: its map node.
+  static constexpr size_t sender_overhead
+    = sizeof(sender_map::value_type) + 4 * sizeof(void*);
+
+  reassembly_limits limits;
+  reassembly_stats stats;
+  sender_map senders;
+  /// One map node kept after its sender emptied, so that a lone sender does
+  /// not cost a node allocation per packet.
+  sender_map::node_type spare;
+  /// Early fragments being moved from the stash into a new packet; reused.
+  std::vector<stash_entry> early;
+  size_t bytes = 0;       // everything charged, overhead included
+  size_t stash_bytes = 0; // the stashed part of `bytes`
+  size_t pending = 0;
+  uint64_t next_order = 0;
+
+  explicit impl(reassembly_limits lim) : limits(lim) {
+  }
+
+  // -- senders -------------------------------------------------------------------
+
+  sender_iter sender_for(link_addr src) {
+    auto i = senders.lower_bound(src);
+    if (i != senders.end() && i->first == src)
+      return i;
+    bytes += sender_overhead;
+    if (!spare.empty()) {
+      spare.key() = src;
+      return senders.insert(i, std::move(spare));
+    }
+    return senders.emplace_hint(i, src, sender_state{});
+  }
+
+  void release_if_empty(sender_iter i) {
+    if (!i->second.empty())
+      return;
+    bytes -= sender_overhead;
+    if (spare.empty())
+      spare = senders.extract(i);
+    else
+      senders.erase(i);
+  }
+
+  size_t sender_bytes(const sender_state& s) const noexcept {
+    return sender_overhead + s.packet_bytes + s.stash_bytes;
+  }
+
+  // -- packets -------------------------------------------------------------------
+
+  void drop_packet(sender_state& s, uint8_t tag) {
+    auto& p = *s.packets[tag];
+    s.packet_bytes -= p.charge;
+    bytes -= p.charge;
+    --s.packet_count;
+    --pending;
+    s.packets[tag].reset();
+  }
+
+  void evict_oldest_packet(sender_state& s) {
+    std::optional<uint8_t> oldest;
+    for (uint8_t t = 0; t < 4; ++t)
+      if (s.packets[t]
+          && (!oldest || s.packets[t]->deadline < s.packets[*oldest]->deadline))
+        oldest = t;
+    drop_packet(s, *oldest);
+    ++stats.over_limit;
+  }
+
+  /// Checks the CRC of a packet whose frames all arrived, delivers or drops
+  /// it, and forgets it.
+  result finish(sender_iter i, uint8_t tag, byte_buffer& out) {
+    auto& p = *i->second.packets[tag];
+    auto r = result::dropped;
+    if (crc_of(p.buf.data(), p.length) == load_le32(p.buf.data() + p.length)) {
+      p.buf.resize(p.length);
+      out.swap(p.buf);
+      ++stats.packets;
+      r = result::complete;
+    } else {
+      ++stats.bad_checksum;
+    }
+    drop_packet(i->second, tag);
+    release_if_empty(i);
+    return r;
+  }
+
+  // -- stash ---------------------------------------------------------------------
+
+  void erase_stash(sender_state& s, size_t index) {
+    auto charge = s.stash[index].charge;
+    s.stash.erase(s.stash.begin() + static_cast<ptrdiff_t>(index));
+    s.stash_bytes -= charge;
+    stash_bytes -= charge;
+    bytes -= charge;
+  }
+
+  /// Moves the stashed fragments of `tag` into `early`, keeping their order.
+  void take_early(sender_state& s, uint8_t tag) {
+    size_t kept = 0;
+    for (size_t k = 0; k < s.stash.size(); ++k) {
+      auto& e = s.stash[k];
+      if (e.tag == tag) {
+        s.stash_bytes -= e.charge;
+        stash_bytes -= e.charge;
+        bytes -= e.charge;
+        early.push_back(std::move(e));
+      } else {
+        if (kept != k) // no self-move: it would empty the entry's buffer
+          s.stash[kept] = std::move(e);
+        ++kept;
+      }
+    }
+    s.stash.erase(s.stash.begin() + static_cast<ptrdiff_t>(kept), s.stash.end());
+  }
+
+  /// Evicts the stashed fragment that arrived first, over all senders. A
+  /// sender other than `self` left empty is released.
+  void evict_oldest_stash(sender_iter self) {
+    auto victim = senders.end();
+    for (auto i = senders.begin(); i != senders.end(); ++i)
+      if (!i->second.stash.empty()
+          && (victim == senders.end()
+              || i->second.stash.front().order
+                   < victim->second.stash.front().order))
+        victim = i;
+    erase_stash(victim->second, 0);
+    ++stats.orphans;
+    if (victim != self)
+      release_if_empty(victim);
+  }
+
+  // -- memory bounds -------------------------------------------------------------
+
+  /// Whether `need` more bytes for sender `s` (null: not holding anything
+  /// yet) can fit once stashed fragments, and for a packet the sender's own
+  /// older packets, are evicted. Other senders' packets are never evicted.
+  /// Decided before anything is allocated or evicted.
+  bool can_make_room(const sender_state* s, size_t need, bool for_packet) const {
+    auto own_packets = s != nullptr ? s->packet_bytes : 0;
+    auto own_charged = s != nullptr ? sender_overhead + own_packets : 0;
+    auto own_fixed = sender_overhead + (for_packet ? 0 : own_packets);
+    auto others_fixed = bytes - stash_bytes - own_charged;
+    return need <= limits.per_sender
+           && own_fixed <= limits.per_sender - need && need <= limits.total
+           && others_fixed + own_fixed <= limits.total - need;
+  }
+
+  /// Makes room for `need` more bytes held by `self` (already charged for its
+  /// overhead). Stashed fragments are guesses and go first, oldest first.
+  /// @pre can_make_room(&self->second, need, for_packet) held before `self`
+  ///      was created or anything was taken out of its stash
+  void make_room(sender_iter self, size_t need) {
+    auto& s = self->second;
+    while (sender_bytes(s) + need > limits.per_sender) {
+      if (!s.stash.empty()) {
+        erase_stash(s, 0);
+        ++stats.orphans;
+      } else {
+        evict_oldest_packet(s);
+      }
+    }
+    while (bytes + need > limits.total) {
+      if (stash_bytes > 0)
+        evict_oldest_stash(self);
+      else
+        evict_oldest_packet(s);
+    }
+  }
+
+  // -- frames --------------------------------------------------------------------
+
+  result malformed() {
+    ++stats.malformed;
+    return result::dropped;
+  }
+
+  result on_single(const uint8_t* data, size_t size, byte_buffer& out) {
+    if ((data[0] & 0x0f) != 0 || size - 1 > limits.max_packet)
+      return malformed();
+    out.assign(data + 1, data + size);
+    ++stats.packets;
+    return result::complete;
+  }
+
+  result on_first(link_addr src, const uint8_t* data, size_t size,
+                  time_point now, byte_buffer& out) {
+    if ((data[0] & 0x07) != 0)
+      return malformed();
+    auto tag = static_cast<uint8_t>(data[0] >> 4 & 0x03);
+    bool wide = (data[0] & first_wide_flag) != 0;
+    auto len = decode_length(data + 1, size - 1);
+    if (!len || len->value > limits.max_packet)
+      return malformed();
+    auto hdr = 1 + len->size;
+    if (size <= hdr)
+      return malformed();
+    auto* body = data + hdr;
+    auto first_data = size - hdr;
+    auto stream = len->value + crc_size;
+    if (first_data > stream)
+      return malformed();
+    auto i = senders.find(src);
+    if (i != senders.end() && i->second.packets[tag]) {
+      auto& old = *i->second.packets[tag];
+      if (old.wide == wide && old.length == len->value
+          && old.first_data == first_data
+          && std::equal(body, body + first_data, old.buf.data())) {
+        ++stats.duplicates;
+        return result::dropped;
+      }
+      drop_packet(i->second, tag);
+      ++stats.superseded;
+    }
+    if (first_data == stream) {
+      // The whole stream fits the first frame: nothing to hold.
+      if (i != senders.end())
+        release_if_empty(i);
+      if (crc_of(body, len->value) != load_le32(body + len->value)) {
+        ++stats.bad_checksum;
+        return result::dropped;
+      }
+      out.assign(body, body + len->value);
+      ++stats.packets;
+      return result::complete;
+    }
+    // Every frame but the last fills the MTU, so the first frame's size is
+    // the sender's MTU and fixes where each later frame goes.
+    auto chunk = size - (wide ? 2 : 1);
+    auto frames = 1 + (stream - first_data + chunk - 1) / chunk;
+    auto need = stream + (frames + 7) / 8;
+    auto* known = i != senders.end() ? &i->second : nullptr;
+    if (!can_make_room(known, need, true)) {
+      ++stats.over_limit;
+      if (known != nullptr) {
+        // Early fragments of a refused packet will never be placed.
+        take_early(*known, tag);
+        stats.orphans += early.size();
+        early.clear();
+        release_if_empty(i);
+      }
+      return result::dropped;
+    }
+    if (i == senders.end())
+      i = sender_for(src);
+    auto& s = i->second;
+    take_early(s, tag);
+    make_room(i, need);
+    auto& p = s.packets[tag].emplace();
+    p.buf.resize(need); // the packet's one allocation, bitmap zeroed
+    p.deadline = deadline_after(now, limits.timeout);
+    p.charge = need;
+    p.length = static_cast<uint32_t>(len->value);
+    p.first_data = static_cast<uint32_t>(first_data);
+    p.chunk = static_cast<uint32_t>(chunk);
+    p.frames = static_cast<uint32_t>(frames);
+    p.wide = wide;
+    std::memcpy(p.buf.data(), body, first_data);
+    p.mark(0);
+    p.received = 1;
+    p.lowest_missing = 1;
+    s.packet_bytes += need;
+    bytes += need;
+    ++s.packet_count;
+    ++pending;
+    for (auto& e : early) {
+      if (e.wide != wide) {
+        ++stats.malformed;
+        continue;
+      }
+      switch (place(p, e.seq, e.bytes.data(), e.bytes.size())) {
+        case placement::placed:
+          break;
+        case placement::duplicate:
+          ++stats.duplicates;
+          break;
+        case placement::misfit:
+          ++stats.orphans;
+          break;
+      }
+    }
+    early.clear();
+    if (p.received == p.frames)
+      return finish(i, tag, out);
+    return result::pending;
+  }
+
+  result on_consecutive(link_addr src, const uint8_t* data, size_t size,
+                        time_point now, byte_buffer& out) {
+    bool wide = data[0] >> 6 == type_wide;
+    size_t hdr = wide ? 2 : 1;
+    if (size <= hdr)
+      return malformed();
+    auto tag = static_cast<uint8_t>(data[0] >> 4 & 0x03);
+    auto seq = static_cast<uint16_t>(wide ? (data[0] & 0x0f) << 8 | data[1]
+                                          : data[0] & 0x0f);
+    auto* body = data + hdr;
+    auto n = size - hdr;
+    auto i = senders.find(src);
+    if (i != senders.end() && i->second.packets[tag]) {
+      auto& p = *i->second.packets[tag];
+      if (p.wide != wide)
+        return malformed();
+      switch (place(p, seq, body, n)) {
+        case placement::placed:
+          if (p.received == p.frames)
+            return finish(i, tag, out);
+          return result::pending;
+        case placement::duplicate:
+          ++stats.duplicates;
+          return result::dropped;
+        case placement::misfit:
+          break; // maybe early for the tag's next packet: stash it
+      }
+    }
+    return stash(src, i, tag, wide, seq, body, n, now);
+  }
+
+  /// Holds a consecutive fragment that found no packet. `i` is the sender or
+  /// senders.end().
+  result stash(link_addr src, sender_iter i, uint8_t tag, bool wide,
+               uint16_t seq, const uint8_t* body, size_t n, time_point now) {
+    if (i != senders.end()) {
+      // One entry per (tag, width, seq): the same fragment again is a
+      // duplicate, a different one replaces the older (and staler) guess.
+      auto& st = i->second.stash;
+      for (size_t k = 0; k < st.size(); ++k) {
+        auto& e = st[k];
+        if (e.tag == tag && e.wide == wide && e.seq == seq) {
+          if (e.bytes.size() == n
+              && std::equal(body, body + n, e.bytes.data())) {
+            ++stats.duplicates;
+            return result::dropped;
+          }
+          erase_stash(i->second, k);
+          ++stats.orphans;
+          break;
+        }
+      }
+    }
+    auto need = sizeof(stash_entry) + n;
+    if (!can_make_room(i != senders.end() ? &i->second : nullptr, need,
+                       false)) {
+      ++stats.orphans;
+      if (i != senders.end())
+        release_if_empty(i);
+      return result::dropped;
+    }
+    if (i == senders.end())
+      i = sender_for(src);
+    make_room(i, need);
+    auto& s = i->second;
+    s.stash.push_back(stash_entry{byte_buffer(body, body + n),
+                                  deadline_after(now, limits.timeout), need,
+                                  next_order++, seq, tag, wide});
+    s.stash_bytes += need;
+    stash_bytes += need;
+    bytes += need;
+    return result::pending;
+  }
+
+  result push(link_addr src, const uint8_t* data, size_t size, time_point now,
+              byte_buffer& out) {
+    if (size == 0 || data == nullptr)
+      return malformed();
+    if (data[0] >> 6 == type_single)
+      return on_single(data, size, out);
+    // A frame identical to one of the sender's last few fragmented frames is
+    // a duplicate, even when its packet is complete already (it would
+    // otherwise wait as an early fragment and spoil the next packet with
+    // the same tag). A legitimate identical frame needs the same tag and
+    // sequence number: at least 8 frames later.
+    auto hash = std::hash<std::string_view>{}(
+      std::string_view{reinterpret_cast<const char*>(data), size});
+    if (auto i = recent.find(src); i != recent.end() && i->second.contains(hash)) {
+      ++stats.duplicates;
+      return result::dropped;
+    }
+    auto res = data[0] >> 6 == type_first
+                 ? on_first(src, data, size, now, out)
+                 : on_consecutive(src, data, size, now, out);
+    // Remember only frames that were taken: refusing allocates nothing.
+    if (res != result::dropped)
+      recent_ring(src).add(hash);
+    return res;
+  }
+
+  /// Hashes of a sender's most recent fragmented frames.
+  struct recent_frames {
+    static constexpr size_t capacity = 7;
+    std::array<size_t, capacity> hashes{};
+    uint8_t next = 0;
+    uint8_t count = 0;
+
+    bool contains(size_t h) const noexcept {
+      for (size_t i = 0; i < count; ++i)
+        if (hashes[i] == h)
+          return true;
+      return false;
+    }
+
+    void add(size_t h) noexcept {
+      hashes[next] = h;
+      next = static_cast<uint8_t>((next + 1) % capacity);
+      if (count < capacity)
+        ++count;
+    }
+  };
+
+  /// Bounded: forgetting every sender's history costs at most a missed
+  /// duplicate, which the window and the CRC still catch.
+  static constexpr size_t max_recent_senders = 4096;
+
+  recent_frames& recent_ring(link_addr src) {
+    if (recent.size() >= max_recent_senders && recent.count(src) == 0)
+      recent.clear();
+    return recent[src];
+  }
+
+  std::unordered_map<link_addr, recent_frames> recent;
+
+  // -- time ----------------------------------------------------------------------
+
+  size_t expire(time_point now) {
+    size_t dropped = 0;
+    for (auto i = senders.begin(); i != senders.end();) {
+      auto& s = i->second;
+      for (uint8_t t = 0; t < 4; ++t) {
+        if (s.packets[t] && s.packets[t]->deadline <= now) {
+          drop_packet(s, t);
+          ++stats.timed_out;
+          ++dropped;
+        }
+      }
+      for (size_t k = s.stash.size(); k-- > 0;) {
+        if (s.stash[k].deadline <= now) {
+          erase_stash(s, k);
+          ++stats.orphans;
+        }
+      }
+      auto next = std::next(i);
+      release_if_empty(i);
+      i = next;
+    }
+    return dropped;
+  }
+
+  std::optional<time_point> next_deadline() const {
+    std::optional<time_point> first;
+    auto consider = [&](time_point t) {
+      if (!first || t < *first)
+        first = t;
+    };
+    for (auto& [src, s] : senders) {
+      for (auto& p : s.packets)
+        if (p)
+          consider(p->deadline);
+      for (auto& e : s.stash)
+        consider(e.deadline);
+    }
+    return first;
+  }
+};
+
+reassembler::reassembler(reassembly_limits limits)
+  : impl_(std::make_unique<impl>(limits)) {
+}
+
+reassembler::~reassembler() = default;
+
+reassembler::reassembler(reassembler&&) noexcept = default;
+
+reassembler& reassembler::operator=(reassembler&&) noexcept = default;
+
+reassembler::result reassembler::push(link_addr src, const uint8_t* data,
+                                      size_t size, time_point now,
+                                      byte_buffer& out) {
+  return impl_->push(src, data, size, now, out);
+}
+
+size_t reassembler::expire(time_point now) {
+  return impl_->expire(now);
+}
+
+std::optional<reassembler::time_point> reassembler::next_deadline() const {
+  return impl_->next_deadline();
+}
+
+size_t reassembler::memory_in_use() const noexcept {
+  return impl_->bytes;
+}
+
+size_t reassembler::pending() const noexcept {
+  return impl_->pending;
+}
+
+const reassembly_stats& reassembler::stats() const noexcept {
+  return impl_->stats;
+}
+
+const reassembly_limits& reassembler::limits() const noexcept {
+  return impl_->limits;
+}
+
+} // namespace herm

@@ -86,7 +86,10 @@ struct reassembly_stats {
 /// Reassembles packets from frames of many senders on one link, tolerating
 /// loss, duplication and reordering (within 16 frames for narrow sequence
 /// numbers, within 4096 for wide). Never delivers a corrupted packet: every
-/// fragmented packet is checked against its CRC-32.
+/// fragmented packet is checked against its CRC-32. Single-frame packets
+/// carry no sequence number: a duplicated single frame is delivered twice.
+/// A packet above 2^21 - 1 bytes cannot be fragmented: frames_for() is 0
+/// and split() emits nothing.
 class reassembler {
 public:
   using time_point = std::chrono::steady_clock::time_point;

@@ -156,10 +156,15 @@ io_manager_actor::behavior_type io_manager_fun(io_impl self,
   // Devices (and with them their channels) end with the IO manager.
   self->attach_functor([running = self->state.running](const caf::error& reason) {
     for (auto& kv : *running)
+    {
       // A normal exit would be ignored by the device: use user_shutdown.
-      caf::anon_send_exit(kv.second, reason ? reason
-                                            : caf::make_error(
-                                              caf::exit_reason::user_shutdown));
+      caf::error why = reason ? reason
+                              : caf::make_error(caf::exit_reason::user_shutdown);
+      kv.second->enqueue(nullptr, caf::make_message_id(),
+                         caf::make_message(caf::exit_msg{kv.second.address(),
+                                                         std::move(why)}),
+                         nullptr);
+    }
     running->clear();
   });
   self->set_down_handler([self](caf::down_msg& msg) {

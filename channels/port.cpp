@@ -20,9 +20,14 @@ void packet_port::add_stats(channel_stats&) const {
   // nop
 }
 
+size_t packet_port::frames_for(size_t) const {
+  return 1;
+}
+
 // -- frame_port ----------------------------------------------------------------
 
-frame_port::frame_port(link_driver_ptr driver) : driver_(std::move(driver)) {
+frame_port::frame_port(link_driver_ptr driver, frame_writer writer)
+  : driver_(std::move(driver)), writer_(std::move(writer)) {
   // nop
 }
 
@@ -36,7 +41,8 @@ caf::expected<size_t> frame_port::send(link_addr dst, uint8_t priority,
     return make_error(ec::packet_too_large,
                       std::to_string(size) + " bytes exceed the MTU of "
                         + std::to_string(driver_->profile().mtu));
-  if (auto err = driver_->send(dst, data, size, priority))
+  if (auto err = writer_ ? writer_(dst, priority, data, size)
+                         : driver_->send(dst, data, size, priority))
     return err;
   return size_t{1};
 }
@@ -133,9 +139,11 @@ void fragmenting_port::add_stats(channel_stats& st) const {
 // -- factory -------------------------------------------------------------------
 
 caf::expected<std::unique_ptr<packet_port>>
-make_port(link_driver_ptr driver, reassembly_limits limits) {
+make_port(link_driver_ptr driver, reassembly_limits limits,
+          frame_writer writer) {
   auto mtu = driver->profile().mtu;
-  std::unique_ptr<packet_port> port = std::make_unique<frame_port>(driver);
+  std::unique_ptr<packet_port> port
+    = std::make_unique<frame_port>(driver, std::move(writer));
   if (mtu >= limits.max_packet)
     return port;
   if (mtu < min_fragment_mtu)

@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 
@@ -50,12 +51,21 @@ public:
 
   /// Adds the port's receive-side drop counters to `st`.
   virtual void add_stats(channel_stats& st) const;
+
+  /// Frames a packet of `size` bytes takes on the link.
+  virtual size_t frames_for(size_t size) const;
 };
+
+/// Puts one frame on the link. The channel supplies it, so that it can
+/// queue frames when the driver's own queue is full.
+using frame_writer = std::function<caf::error(link_addr dst, uint8_t priority,
+                                              const uint8_t* data, size_t size)>;
 
 /// One packet per frame; packets above the MTU are refused.
 class frame_port : public packet_port {
 public:
-  explicit frame_port(link_driver_ptr driver);
+  /// Writes with `writer`, or straight to the driver when it is empty.
+  frame_port(link_driver_ptr driver, frame_writer writer = {});
 
   uint32_t max_packet() const override;
 
@@ -67,6 +77,7 @@ public:
 
 private:
   link_driver_ptr driver_;
+  frame_writer writer_;
 };
 
 /// Decorator: fragments packets for the wrapped port's MTU and reassembles.
@@ -93,6 +104,10 @@ public:
     return reassembler_;
   }
 
+  size_t frames_for(size_t size) const override {
+    return fragmenter_.frames_for(size);
+  }
+
 private:
   std::unique_ptr<packet_port> inner_;
   fragmenter fragmenter_;
@@ -104,6 +119,7 @@ private:
 /// fragmenting_port when the MTU is smaller than `limits.max_packet`.
 /// Errors: ec::invalid_parameter when the MTU is too small to fragment.
 caf::expected<std::unique_ptr<packet_port>>
-make_port(link_driver_ptr driver, reassembly_limits limits);
+make_port(link_driver_ptr driver, reassembly_limits limits,
+          frame_writer writer = {});
 
 } // namespace herm

@@ -44,7 +44,9 @@ caf::error make_error(ec x, std::string context) {
 }
 
 bool is(const caf::error& err, ec x) {
-  return err.category() == category && err.code() == static_cast<uint8_t>(x);
+  // category() dereferences a null pointer on an empty error in CAF 0.17.
+  return err && err.category() == category
+         && err.code() == static_cast<uint8_t>(x);
 }
 
 std::string render(const caf::error& err) {

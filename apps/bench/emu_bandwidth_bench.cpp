@@ -1,2 +1,227 @@
+// Bandwidth of the emulated medium (link kind "emu") as a receiver sees it.
+//
+// For each profile, one station sends back-to-back MTU-sized frames to
+// another through the real driver (two drivers, sockets, threads). Each
+// iteration is one burst; its manual time is the medium time the receiver
+// observed, from the first frame's arrival to the last one's, so the
+// reported time and rates are the medium's, not the sender's loop.
+//
+// Counters:
+//   configured_bps  the profile's bandwidth (bit/s)
+//   delivered_bps   (frames - 1) * (MTU * 8 + frame_overhead_bits) / elapsed,
+//                   summed over iterations: bits on the medium per second
+//   ratio           delivered_bps / configured_bps (the issue asks for 0.95..1.05)
+//                   A few 1e-3 above 1 is measurement noise: a late wake-up
+//                   of the receiver for the first frame shortens `elapsed`.
+//   frame_us        medium time of one frame
+//   frames, lost    frames received / not received (receiver overruns)
+//
+// Run: build/bin/bench_emu_bandwidth  (about 10 s; rs232c alone takes ~1.5 s)
+// Only the issue's five profiles:
+//   build/bin/bench_emu_bandwidth --benchmark_filter='can2_0|usb1_1|ethernet/|ieee1394a|rs232c'
+
 #include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <ftw.h>
+#include <string>
+#include <thread>
+
+#include <time.h>
+#include <unistd.h>
+
+#include "actors/runtime/error.hpp"
+#include "channels/drivers/emu_wire.hpp"
+#include "channels/link_driver.hpp"
+
+using namespace herm;
+
+namespace {
+
+int64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+}
+
+int remove_entry(const char* path, const struct stat*, int, FTW*) {
+  return ::remove(path);
+}
+
+/// Counts frames and remembers when the first and the last arrived. Called
+/// by the receiving driver's thread only; read by the benchmark thread.
+class arrival_counter : public frame_handler {
+public:
+  void reset() {
+    count_.store(0);
+    first_ns_.store(0);
+    last_ns_.store(0);
+  }
+
+  void on_frame(link_addr, const uint8_t*, size_t) override {
+    auto t = now_ns();
+    if (count_.load(std::memory_order_relaxed) == 0)
+      first_ns_.store(t, std::memory_order_relaxed);
+    last_ns_.store(t, std::memory_order_relaxed);
+    count_.fetch_add(1, std::memory_order_release);
+  }
+
+  void on_malformed(link_addr, const char*) override {
+    malformed_.fetch_add(1);
+  }
+
+  void on_event(link_event_kind, link_addr, std::string) override {}
+
+  void on_failure(caf::error) override {
+    failed_.store(true);
+  }
+
+  uint64_t count() const {
+    return count_.load(std::memory_order_acquire);
+  }
+  int64_t first_ns() const {
+    return first_ns_.load(std::memory_order_relaxed);
+  }
+  int64_t last_ns() const {
+    return last_ns_.load(std::memory_order_relaxed);
+  }
+  bool failed() const {
+    return failed_.load() || malformed_.load() > 0;
+  }
+
+private:
+  std::atomic<uint64_t> count_{0};
+  std::atomic<int64_t> first_ns_{0};
+  std::atomic<int64_t> last_ns_{0};
+  std::atomic<uint64_t> malformed_{0};
+  std::atomic<bool> failed_{false};
+};
+
+void emu_bandwidth(benchmark::State& state, const char* profile,
+                   double burst_seconds, const char* bandwidth = nullptr) {
+  char tmpl[] = "/tmp/herm-emu-bench-XXXXXX";
+  if (::mkdtemp(tmpl) == nullptr) {
+    state.SkipWithError("mkdtemp failed");
+    return;
+  }
+  std::string root = tmpl;
+  auto cleanup = [&] { ::nftw(root.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS); };
+  auto* kind = find_link_kind("emu");
+  device_config tx_cfg{"tx0", "emu", root + "/medium",
+                       {{"profile", profile}, {"station", "1"}}};
+  device_config rx_cfg{"rx0", "emu", root + "/medium",
+                       {{"profile", profile}, {"station", "2"}}};
+  if (bandwidth != nullptr) {
+    tx_cfg.options["bandwidth"] = bandwidth;
+    rx_cfg.options["bandwidth"] = bandwidth;
+  }
+  auto tx = kind->open(tx_cfg);
+  auto rx = tx ? kind->open(rx_cfg) : tx;
+  if (!tx || !rx) {
+    state.SkipWithError(render(tx ? rx.error() : tx.error()).c_str());
+    cleanup();
+    return;
+  }
+  auto counter = std::make_shared<arrival_counter>();
+  (*rx)->start(counter);
+  (*tx)->start(std::make_shared<arrival_counter>());
+  auto& prof = (*tx)->profile();
+  auto frame_bits = double(prof.mtu) * 8 + prof.frame_overhead_bits;
+  auto frame_ns = emu::frame_time_ns(prof.mtu, prof.frame_overhead_bits,
+                                     prof.bandwidth_bps);
+  auto frames = std::max<uint64_t>(
+    16, static_cast<uint64_t>(burst_seconds * 1e9 / double(frame_ns)));
+  // While the transmit queue is full, nap for a fraction of its content.
+  auto nap = std::chrono::nanoseconds{
+    std::clamp<int64_t>(frame_ns * 16, 20'000, 2'000'000)};
+  byte_buffer payload(prof.mtu, 0x55);
+  double bits = 0;
+  double seconds = 0;
+  uint64_t received = 0;
+  uint64_t lost = 0;
+  for (auto _ : state) {
+    counter->reset();
+    for (uint64_t sent = 0; sent < frames;) {
+      auto err = (*tx)->send(2, payload.data(), payload.size(), prio_bulk);
+      if (!err) {
+        ++sent;
+      } else if (is(err, ec::queue_full)) {
+        std::this_thread::sleep_for(nap);
+      } else {
+        state.SkipWithError(render(err).c_str());
+        break;
+      }
+    }
+    // Wait for the burst to drain; give up after 1 s without progress.
+    uint64_t seen = 0;
+    auto progress_at = now_ns();
+    while (counter->count() < frames && now_ns() - progress_at < 1'000'000'000) {
+      if (counter->count() != seen) {
+        seen = counter->count();
+        progress_at = now_ns();
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds{1});
+    }
+    auto got = counter->count();
+    if (got < 2 || counter->failed()) {
+      state.SkipWithError("the receiver got (almost) nothing or failed");
+      break;
+    }
+    auto elapsed = double(counter->last_ns() - counter->first_ns()) / 1e9;
+    state.SetIterationTime(elapsed);
+    bits += double(got - 1) * frame_bits;
+    seconds += elapsed;
+    received += got;
+    lost += frames - got;
+  }
+  (*tx)->stop();
+  (*rx)->stop();
+  cleanup();
+  if (seconds <= 0)
+    return;
+  auto delivered = bits / seconds;
+  state.SetBytesProcessed(static_cast<int64_t>(received) * prof.mtu);
+  state.counters["configured_bps"] = double(prof.bandwidth_bps);
+  state.counters["delivered_bps"] = delivered;
+  state.counters["ratio"] = delivered / double(prof.bandwidth_bps);
+  state.counters["frame_us"] = double(frame_ns) / 1e3;
+  state.counters["frames"] = double(received);
+  state.counters["lost"] = double(lost);
+}
+
+// Bursts of about 0.5 s (rs232c: one burst of 1.5 s, about 112 frames).
+BENCHMARK_CAPTURE(emu_bandwidth, can2_0, "can2.0", 0.5)
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(emu_bandwidth, usb1_1, "usb1.1", 0.5)
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(emu_bandwidth, ethernet, "ethernet", 0.5)
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(emu_bandwidth, ieee1394a, "ieee1394a", 0.5)
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(emu_bandwidth, rs232c, "rs232c", 1.5)
+  ->UseManualTime()->Iterations(1)->Unit(benchmark::kMillisecond);
+// The other built-in profiles: usb2.0 is the highest frame rate of Table 1
+// (1024-byte frames at 480 Mbit/s, about 58,000 frames/s).
+BENCHMARK_CAPTURE(emu_bandwidth, ieee1394b, "ieee1394b", 0.5)
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(emu_bandwidth, usb2_0, "usb2.0", 0.5)
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+
+// Ceiling probes: pacing holds while the per-frame cost (a send, a receive,
+// two thread wake-ups) fits in a frame time. Ethernet at 1 Gbit/s is 80,000
+// frames/s and holds; at 2 Gbit/s (160,000 frames/s) the ratio shows how
+// much a 2-core machine can move, not a pacing error.
+BENCHMARK_CAPTURE(emu_bandwidth, ceiling_ethernet_1g, "ethernet", 0.5,
+                  "1000000000")
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(emu_bandwidth, ceiling_ethernet_2g, "ethernet", 0.5,
+                  "2000000000")
+  ->UseManualTime()->Iterations(2)->Unit(benchmark::kMillisecond);
+
+} // namespace
+
 BENCHMARK_MAIN();

@@ -28,6 +28,7 @@
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/system.hpp"
 #include "actors/runtime/type_ids.hpp"
+#include "channels/drivers/udp_addr.hpp"
 #include "channels/io_manager.hpp"
 
 using namespace herm;
@@ -52,6 +53,12 @@ uint16_t free_udp_port() {
   ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
   ::close(fd);
   return ntohs(addr.sin_port);
+}
+
+std::string peer_name(const std::string& kind, link_addr addr) {
+  if (kind == "udp")
+    return udp::format_addr(addr);
+  return std::to_string(addr);
 }
 
 std::string preview(const byte_buffer& buf) {
@@ -153,7 +160,7 @@ int run_module(const role_args& a) {
         auto& info = infos[pkt.channel];
         say("received " + std::to_string(pkt.bytes.size()) + " bytes on "
             + info.device + " (" + info.profile.name + ") from " + info.kind
-            + " address " + std::to_string(pkt.src) + ": \"" + preview(pkt.bytes)
+            + " address " + peer_name(info.kind, pkt.src) + ": \"" + preview(pkt.bytes)
             + "\"");
         if (!sensor) {
           std::string ack = "ack " + std::to_string(pkt.bytes.size()) + " bytes";

@@ -134,6 +134,20 @@ private:
   int fd_ = -1;
 };
 
+/// Holds flock(LOCK_EX) on the medium file. Unlocks explicitly: the
+/// mapping keeps the open file description alive, so close() alone would
+/// keep the lock until munmap.
+struct medium_lock {
+  unique_fd fd;
+  medium_lock() = default;
+  medium_lock(const medium_lock&) = delete;
+  medium_lock& operator=(const medium_lock&) = delete;
+  ~medium_lock() {
+    if (fd)
+      ::flock(fd.get(), LOCK_UN);
+  }
+};
+
 std::string station_file(uint64_t station) {
   return std::to_string(station) + ".sock";
 }
@@ -335,15 +349,17 @@ public:
   caf::error open() {
     if (auto err = open_directory())
       return err;
-    unique_fd lock_fd;
+    medium_lock lock_fd;
     if (auto err = open_medium(lock_fd))
       return err;
     if (auto err = claim_station())
       return err;
     medium_->generation.fetch_add(1);
-    lock_fd.reset(); // releases the flock; the mapping stays
+    return caf::none; // lock_fd unlocks
+  }
+
+  void start_transmitter() {
     tx_thread_ = std::thread{[this] { transmit_loop(); }};
-    return caf::none;
   }
 
   // -- link_driver ---------------------------------------------------------------
@@ -579,24 +595,25 @@ private:
 
   /// Opens, locks, sizes and maps <dir>/medium. The lock stays held in
   /// `lock_fd` while the station is claimed.
-  caf::error open_medium(unique_fd& lock_fd) {
-    unique_fd fd{::open(medium_path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC,
-                        0666)};
-    if (!fd)
+  caf::error open_medium(medium_lock& lock_fd) {
+    lock_fd.fd.reset(
+      ::open(medium_path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666));
+    auto fd = lock_fd.fd.get();
+    if (fd < 0)
       return fail(ec::device_unavailable, "cannot open medium file '"
                                             + medium_path_
                                             + "': " + errno_text(errno));
-    while (::flock(fd.get(), LOCK_EX) != 0)
+    while (::flock(fd, LOCK_EX) != 0)
       if (errno != EINTR)
         return fail(ec::device_unavailable, "cannot lock medium file '"
                                               + medium_path_
                                               + "': " + errno_text(errno));
     struct stat st;
-    if (::fstat(fd.get(), &st) != 0)
+    if (::fstat(fd, &st) != 0)
       return fail(ec::device_unavailable, "cannot stat medium file '"
                                             + medium_path_
                                             + "': " + errno_text(errno));
-    if (st.st_size == 0 && ::ftruncate(fd.get(), sizeof(medium_layout)) != 0)
+    if (st.st_size == 0 && ::ftruncate(fd, sizeof(medium_layout)) != 0)
       return fail(ec::device_unavailable, "cannot size medium file '"
                                             + medium_path_
                                             + "': " + errno_text(errno));
@@ -608,7 +625,7 @@ private:
     medium_dev_ = st.st_dev;
     medium_ino_ = st.st_ino;
     auto* mem = ::mmap(nullptr, sizeof(medium_layout), PROT_READ | PROT_WRITE,
-                       MAP_SHARED, fd.get(), 0);
+                       MAP_SHARED, fd, 0);
     if (mem == MAP_FAILED)
       return fail(ec::device_unavailable, "cannot map medium file '"
                                             + medium_path_
@@ -627,7 +644,6 @@ private:
                     + ", this driver speaks version "
                     + std::to_string(medium_version));
     }
-    lock_fd = std::move(fd);
     return caf::none;
   }
 
@@ -1152,6 +1168,7 @@ caf::expected<link_driver_ptr> open_emu(const device_config& cfg) {
   auto driver = std::make_shared<emu_driver>(std::move(*conf));
   if (auto err = driver->open())
     return err;
+  driver->start_transmitter();
   return link_driver_ptr{std::move(driver)};
 }
 

@@ -2,7 +2,16 @@
 // "Ethernet" row of Table 1). Unicast goes to one IP:PORT; broadcast_addr fans
 // out to the configured broadcast address and to every configured peer, which
 // is how modules find each other on a segment (broadcast) or on loopback
-// (peers list).
+// (peers list). With neither configured, broadcast_addr sends nothing and
+// succeeds (nobody to reach).
+//
+// Threading: send() may be called from any thread; it holds a shared lock so
+// that stop() cannot close the socket under it. One receive thread per
+// driver polls the socket and an eventfd (stop's wake-up), drains datagrams
+// with recvmmsg into buffers allocated once in start(), and calls the
+// handler. Datagrams from our own port and one of this host's (namespace's)
+// IPv4 addresses, snapshotted by getifaddrs in start(), are our own
+// broadcasts looped back by the kernel and are ignored.
 
 #include <ifaddrs.h>
 #include <net/if.h>
@@ -330,6 +339,10 @@ private:
           return;
         }
       }
+      if ((ev & (POLLIN | POLLERR)) == 0 && (ev & POLLHUP) != 0) {
+        report_failure("socket hung up", EPIPE);
+        return;
+      }
       if ((ev & POLLIN) != 0 && !drain())
         return;
     }
@@ -506,7 +519,8 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
                       bind_device.c_str(),
                       static_cast<socklen_t>(bind_device.size()))
            != 0)
-    return fail(ec::device_unavailable, "cannot bind to interface '"
+    return fail(ec::device_unavailable, "option 'bind_device': cannot bind "
+                                          "to interface '"
                                           + bind_device
                                           + "': " + errno_text(errno));
   const int buf_opts[2] = {SO_RCVBUF, SO_SNDBUF};

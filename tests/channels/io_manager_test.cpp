@@ -49,7 +49,7 @@ public:
   module make_module(uint16_t station, std::string profile = "ethernet",
                      bool persistent = false) {
     module m;
-    m.io = spawn_io_manager(sys());
+    m.io = track(spawn_io_manager(sys()));
     device_config cfg{"lan", "inproc", segment_name(),
                       {{"station", std::to_string(station)},
                        {"profile", profile}}};
@@ -184,7 +184,7 @@ TEST_F(nil_test, control_reads_parameters_and_refuses_impossible_ones) {
 }
 
 TEST_F(nil_test, unknown_device_kind_address_and_option_are_typed_errors) {
-  auto io = spawn_io_manager(sys());
+  auto io = track(spawn_io_manager(sys()));
   auto r1 = call<channel_actor, channel_info>(io, atom::open_v,
                                               channel_request{"nope", "*"});
   ASSERT_FALSE(r1);
@@ -219,7 +219,7 @@ TEST_F(nil_test, point_to_point_channels_hear_only_their_peer) {
   auto a = make_module(1);
   auto c = make_module(3);
   // Module b: one channel for peer 1, one for everybody else.
-  auto io = spawn_io_manager(sys());
+  auto io = track(spawn_io_manager(sys()));
   ASSERT_TRUE((call<device_info>(io, atom::add_v,
                                  device_config{"lan", "inproc", segment_name(),
                                                {{"station", "2"}}})));

@@ -3,13 +3,13 @@
 // Three groups:
 //  - udp_driver: drivers on loopback (127.0.0.1, ephemeral ports) in this
 //    process;
-//  - udp_driver_processes: a forked child process runs its own driver and
-//    echoes every frame;
+//  - udp_driver_processes: a child process (this binary re-executed in
+//    "agent mode", see agent_main) runs its own driver and echoes every frame;
 //  - udp_driver_segment: a real Ethernet segment. As root, the test creates
 //    four network namespaces (herm-<pid>-a/b/c and herm-<pid>-br), joins the
 //    three stations to a Linux bridge inside the fourth with veth pairs
 //    (nothing is added to the host's own namespace), runs one driver per
-//    station in a forked child that entered the namespace with setns(), and
+//    station in an agent process that entered the namespace with setns(), and
 //    deletes every namespace afterwards, also on failure. It skips, saying
 //    why, when not root or when namespaces, veth pairs or bridges cannot be
 //    created. Set HERM_NO_NETNS=1 to skip it on purpose.
@@ -19,7 +19,6 @@
 
 #include <gtest/gtest.h>
 
-#include <dirent.h>
 #include <fcntl.h>
 #include <poll.h>
 #include <sched.h>
@@ -112,18 +111,6 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
 
 caf::error send_bytes(link_driver& drv, link_addr dst, const byte_buffer& buf) {
   return drv.send(dst, buf.data(), buf.size(), prio_normal);
-}
-
-/// Number of threads of this process; fork() is only safe at 1.
-size_t thread_count() {
-  size_t n = 0;
-  if (auto* dir = opendir("/proc/self/task")) {
-    while (auto* entry = readdir(dir))
-      if (entry->d_name[0] != '.')
-        ++n;
-    closedir(dir);
-  }
-  return n;
 }
 
 // -- recording frame handler ---------------------------------------------------
@@ -274,9 +261,10 @@ uint16_t probably_free_port() {
 
 // -- agent processes -------------------------------------------------------------
 
-// An agent is a forked child that runs one udp driver (optionally inside a
+// An agent is a child process that runs one udp driver (optionally inside a
 // network namespace) and talks to the test over a SOCK_SEQPACKET socket pair:
-//   test -> agent: "send DST HEX" (DST is A.B.C.D:PORT or *), "quit"
+//   test -> agent: "config ..." (first, see agent_setup), "send DST HEX"
+//                  (DST is A.B.C.D:PORT or *), "quit"
 //   agent -> test: "ready LOCAL", "sent ok" / "sent ERROR", "frame SRC HEX",
 //                  "malformed SRC WHY", "failure TEXT", "bye"
 // In echo mode the agent also sends every frame back to its source.
@@ -319,18 +307,72 @@ private:
   link_driver* drv_ = nullptr;
 };
 
-/// Body of the child process; never returns.
-[[noreturn]] void agent_main(int ctl, pid_t parent, const std::string& netns,
-                             const device_config& cfg, bool echo) {
+/// What an agent runs: sent by the test as the first control message,
+/// "config" followed by lines "name=", "interface=", "netns=", "echo=0|1"
+/// and one "option=KEY=VALUE" per option.
+struct agent_setup {
+  std::string netns;
+  device_config cfg;
+  bool echo = false;
+};
+
+std::string encode(const agent_setup& setup) {
+  std::string result = "config\nname=" + setup.cfg.name + "\ninterface="
+                       + setup.cfg.interface + "\nnetns=" + setup.netns
+                       + "\necho=" + (setup.echo ? "1" : "0") + "\n";
+  for (auto& [key, value] : setup.cfg.options)
+    result += "option=" + key + "=" + value + "\n";
+  return result;
+}
+
+agent_setup decode(const std::string& text) {
+  agent_setup result;
+  result.cfg.kind = "udp";
+  size_t pos = 0;
+  while (pos < text.size()) {
+    auto eol = text.find('\n', pos);
+    auto line = text.substr(pos, eol - pos);
+    pos = eol == std::string::npos ? text.size() : eol + 1;
+    auto eq = line.find('=');
+    if (eq == std::string::npos)
+      continue;
+    auto key = line.substr(0, eq);
+    auto value = line.substr(eq + 1);
+    if (key == "name")
+      result.cfg.name = value;
+    else if (key == "interface")
+      result.cfg.interface = value;
+    else if (key == "netns")
+      result.netns = value;
+    else if (key == "echo")
+      result.echo = value == "1";
+    else if (key == "option" && value.find('=') != std::string::npos)
+      result.cfg.options[value.substr(0, value.find('='))]
+        = value.substr(value.find('=') + 1);
+  }
+  return result;
+}
+
+/// Body of an agent process; never returns. Exit codes: 0 after "quit",
+/// 2 orphaned, 3 setns failed, 4 driver failed, 5 test gone or time out.
+[[noreturn]] void agent_main(int ctl, pid_t parent) {
   ::prctl(PR_SET_PDEATHSIG, SIGKILL);
   if (::getppid() != parent)
     ::_exit(2);
-  // Keep no other descriptor of the test (other agents' control sockets).
+  // Keep no other descriptor of the test.
   if (ctl > 3)
     ::close_range(3, static_cast<unsigned>(ctl) - 1, 0);
   ::close_range(static_cast<unsigned>(ctl) + 1, ~0u, 0);
-  if (!netns.empty()) {
-    auto path = "/var/run/netns/" + netns;
+  std::vector<char> buf(200'000);
+  pollfd first{ctl, POLLIN, 0};
+  if (::poll(&first, 1, 5000) <= 0)
+    ::_exit(5);
+  auto len = ::recv(ctl, buf.data(), buf.size(), 0);
+  if (len <= 0)
+    ::_exit(5);
+  auto setup = decode(std::string(buf.data(), static_cast<size_t>(len)));
+  if (!setup.netns.empty()) {
+    auto path = "/var/run/netns/" + setup.netns;
     auto nfd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (nfd < 0 || ::setns(nfd, CLONE_NEWNET) != 0) {
       send_msg(ctl, "failure setns " + path + ": " + std::strerror(errno));
@@ -338,12 +380,12 @@ private:
     }
     ::close(nfd);
   }
-  auto drv = open_udp(cfg);
+  auto drv = open_udp(setup.cfg);
   if (!drv) {
     send_msg(ctl, "failure " + render(drv.error()));
     ::_exit(4);
   }
-  auto handler = std::make_shared<agent_handler>(ctl, echo);
+  auto handler = std::make_shared<agent_handler>(ctl, setup.echo);
   handler->set_driver(drv->get());
   if (auto err = (*drv)->start(handler)) {
     send_msg(ctl, "failure " + render(err));
@@ -352,7 +394,6 @@ private:
   send_msg(ctl, "ready " + udp::format_addr((*drv)->local_addr()));
   // An orphaned agent never outlives this bound.
   auto deadline = clock_type::now() + 120s;
-  std::vector<char> buf(200'000);
   while (clock_type::now() < deadline) {
     pollfd pfd{ctl, POLLIN, 0};
     if (::poll(&pfd, 1, 500) <= 0)
@@ -390,6 +431,19 @@ private:
   ::_exit(5);
 }
 
+// Agent mode: agent::spawn re-executes this test binary with HERM_UDP_AGENT
+// set to the control socket's descriptor (and HERM_UDP_AGENT_PARENT to the
+// test's pid). Such a process runs one agent, before GoogleTest's main, and
+// never returns. Re-executing (instead of a bare fork) keeps the child safe
+// whatever threads the test process has (sanitizers add their own).
+[[maybe_unused]] const bool agent_mode_checked = [] {
+  auto* fd = std::getenv("HERM_UDP_AGENT");
+  auto* parent = std::getenv("HERM_UDP_AGENT_PARENT");
+  if (fd != nullptr && parent != nullptr)
+    agent_main(std::atoi(fd), static_cast<pid_t>(std::atol(parent)));
+  return true;
+}();
+
 /// The test's handle on an agent. Kills and reaps the child when destroyed.
 class agent {
 public:
@@ -406,27 +460,43 @@ public:
       ::close(ctl_);
   }
 
-  /// Forks the agent; "" or what failed. The calling process must be
-  /// single-threaded.
-  std::string spawn(const std::string& netns,
-                                   const device_config& cfg, bool echo) {
+  /// Starts the agent (this binary in agent mode) with a driver for `cfg`,
+  /// inside network namespace `netns` unless empty; "" or what failed.
+  std::string spawn(const std::string& netns, const device_config& cfg,
+                    bool echo) {
     int fds[2];
     if (::socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, fds) != 0)
       return std::string{"socketpair: "} + std::strerror(errno);
-    auto parent = ::getpid();
-    auto pid = ::fork();
-    if (pid < 0) {
-      ::close(fds[0]);
-      ::close(fds[1]);
-      return std::string{"fork: "} + std::strerror(errno);
-    }
-    if (pid == 0) {
-      ::close(fds[0]);
-      agent_main(fds[1], parent, netns, cfg, echo);
-    }
+    // dup2 onto another number clears close-on-exec in the child.
+    int child_fd = fds[1] == 3 ? 4 : 3;
+    std::vector<std::string> env;
+    for (auto** e = environ; *e != nullptr; ++e)
+      if (std::strncmp(*e, "HERM_UDP_AGENT", 14) != 0)
+        env.emplace_back(*e);
+    env.push_back("HERM_UDP_AGENT=" + std::to_string(child_fd));
+    env.push_back("HERM_UDP_AGENT_PARENT=" + std::to_string(::getpid()));
+    std::vector<char*> envp;
+    for (auto& e : env)
+      envp.push_back(e.data());
+    envp.push_back(nullptr);
+    std::string arg0 = "udp_driver_test-agent";
+    char* argv[] = {arg0.data(), nullptr};
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, fds[1], child_fd);
+    pid_t pid = 0;
+    auto rc = ::posix_spawn(&pid, "/proc/self/exe", &actions, nullptr, argv,
+                            envp.data());
+    posix_spawn_file_actions_destroy(&actions);
     ::close(fds[1]);
+    if (rc != 0) {
+      ::close(fds[0]);
+      return std::string{"posix_spawn /proc/self/exe: "} + std::strerror(rc);
+    }
     pid_ = pid;
     ctl_ = fds[0];
+    if (!send_msg(ctl_, encode(agent_setup{netns, cfg, echo})))
+      return std::string{"cannot configure the agent: "} + std::strerror(errno);
     return "";
   }
 
@@ -841,6 +911,13 @@ TEST(udp_driver, broadcast_reaches_every_peer_but_not_the_sender) {
   EXPECT_EQ(at_a[0].bytes, marker);
 }
 
+TEST(udp_driver, broadcast_without_peers_or_broadcast_address_sends_nothing_and_succeeds) {
+  station st;
+  ASSERT_EQ(start_station(st, udp_config("eth0", "127.0.0.1:0")), "");
+  EXPECT_EQ(render(send_bytes(*st.drv, broadcast_addr, bytes_of("anyone?"))),
+            "none");
+}
+
 TEST(udp_driver, ignores_datagrams_from_its_own_address_and_port) {
   station a;
   ASSERT_EQ(start_station(a, udp_config("a", "127.0.0.1:0")), "");
@@ -1129,7 +1206,6 @@ TEST(udp_driver, refuses_a_second_start_and_a_missing_handler) {
 // -- several processes -----------------------------------------------------------
 
 TEST(udp_driver_processes, a_driver_in_a_child_process_echoes_every_frame) {
-  ASSERT_EQ(thread_count(), 1u) << "fork needs a single-threaded test process";
   agent child;
   ASSERT_EQ(child.spawn("", udp_config("echo0", "127.0.0.1:0"), true),
             "");
@@ -1166,14 +1242,14 @@ TEST(udp_driver_processes, a_driver_in_a_child_process_echoes_every_frame) {
 // -- a real Ethernet segment -----------------------------------------------------
 
 TEST(udp_driver_segment, broadcasts_reach_the_other_stations_and_unicasts_cross_the_bridge) {
-  if (auto* flag = std::getenv("HERM_NO_NETNS"); flag != nullptr && *flag != '\0'
-                                                 && std::string{flag} != "0")
+  auto* no_netns = std::getenv("HERM_NO_NETNS");
+  if (no_netns != nullptr && std::string{no_netns} != ""
+      && std::string{no_netns} != "0")
     GTEST_SKIP() << "HERM_NO_NETNS is set: skipping the network namespace "
                     "test on request";
   if (::geteuid() != 0)
     GTEST_SKIP() << "needs root to create network namespaces (running as uid "
                  << ::geteuid() << ")";
-  ASSERT_EQ(thread_count(), 1u) << "fork needs a single-threaded test process";
   netns_segment segment; // declared first: destroyed after the agents
   std::string why;
   auto built = segment.create(why);

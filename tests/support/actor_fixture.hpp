@@ -16,6 +16,7 @@
 #include "caf/actor_system_config.hpp"
 #include "caf/event_based_actor.hpp"
 #include "caf/scheduler/test_coordinator.hpp"
+#include "caf/send.hpp"
 #include "caf/stateful_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
 
@@ -48,7 +49,18 @@ public:
   }
 
   ~actor_fixture() override {
+    // The actor system waits for every actor at destruction: stop what the
+    // test spawned (IO managers take their devices and channels along).
+    for (auto& hdl : tracked_)
+      caf::anon_send_exit(hdl, caf::exit_reason::user_shutdown);
     sched.run();
+  }
+
+  /// Stops `hdl` when the test ends. Returns `hdl`.
+  template <class Handle>
+  Handle track(Handle hdl) {
+    tracked_.push_back(caf::actor_cast<caf::actor>(hdl));
+    return hdl;
   }
 
   using scheduler_type = caf::scheduler::test_coordinator;
@@ -99,6 +111,7 @@ public:
         [log](channel_down& x) { log->downs.push_back(std::move(x)); },
       };
     });
+    track(hdl);
     return {hdl, log};
   }
 
@@ -110,6 +123,7 @@ private:
 
   caf::actor_system_config cfg_;
   caf::actor_system sys_;
+  std::vector<caf::actor> tracked_;
 
 public:
   scheduler_type& sched;
