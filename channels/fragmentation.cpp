@@ -677,7 +677,7 @@ struct reassembler::impl {
     // sequence number: at least 8 frames later.
     auto hash = std::hash<std::string_view>{}(
       std::string_view{reinterpret_cast<const char*>(data), size});
-    if (auto i = recent.find(src); i != recent.end() && i->second.contains(hash)) {
+    if (auto* ring = find_ring(src); ring != nullptr && ring->contains(hash)) {
       ++stats.duplicates;
       return result::dropped;
     }
@@ -716,13 +716,31 @@ struct reassembler::impl {
   /// duplicate, which the window and the CRC still catch.
   static constexpr size_t max_recent_senders = 4096;
 
+  recent_frames* find_ring(link_addr src) {
+    if (last_ring != nullptr && last_src == src)
+      return last_ring;
+    auto i = recent.find(src);
+    if (i == recent.end())
+      return nullptr;
+    last_src = src;
+    return last_ring = &i->second;
+  }
+
   recent_frames& recent_ring(link_addr src) {
-    if (recent.size() >= max_recent_senders && recent.count(src) == 0)
+    if (auto* ring = find_ring(src))
+      return *ring;
+    if (recent.size() >= max_recent_senders) {
       recent.clear();
-    return recent[src];
+      last_ring = nullptr;
+    }
+    last_src = src;
+    // References into an unordered_map survive rehashing.
+    return *(last_ring = &recent[src]);
   }
 
   std::unordered_map<link_addr, recent_frames> recent;
+  link_addr last_src = 0;
+  recent_frames* last_ring = nullptr;
 
   // -- time ----------------------------------------------------------------------
 

@@ -238,6 +238,22 @@ constexpr id_filter destination_filter(id_format f, uint8_t dst) {
   return {uint32_t{dst} << 4, CAN_EFF_FLAG | 0x0Fu << 4};
 }
 
+// -- arbitration -----------------------------------------------------------------
+
+/// Orders identifiers (with CAN_EFF_FLAG, as in can_id) the way bitwise
+/// arbitration does for data frames: the numerically lower key wins. The key
+/// holds the arbitration field as transmitted, most significant bit first:
+/// the 11 base bits, then RTR/SRR and IDE (dominant 0 for a standard data
+/// frame, recessive 1 1 for an extended one), then the 18 extension bits. So
+/// a standard frame beats an extended frame with the same base bits.
+constexpr uint32_t arbitration_key(canid_t can_id) {
+  if ((can_id & CAN_EFF_FLAG) != 0) {
+    auto id = can_id & CAN_EFF_MASK;
+    return (id >> 18) << 20 | 3u << 18 | (id & 0x3FFFFu);
+  }
+  return (can_id & CAN_SFF_MASK) << 20;
+}
+
 // -- bit timing ------------------------------------------------------------------
 
 /// Bits one data frame of `len` data bytes occupies on the bus, interframe

@@ -1,14 +1,666 @@
-// PLACEHOLDER: being written; replaced before commit.
-#include "channels/link_driver.hpp"
+// The "serial" link kind: a point-to-point byte line (RS232C to a
+// microcontroller, a USB serial adapter, a USB CDC-ACM device, or a pty in
+// tests). Frames are COBS-encoded with a CRC-16 and delimited by 0x00 (see
+// serial_framing.hpp and docs/protocol-serial.md); options are resolved in
+// serial_settings.hpp.
+//
+// Addresses: the line has two ends. Frames from the other end carry src 1
+// ("peer"); this end is 0 ("local"). send() to 1 or to broadcast_addr goes
+// down the line.
+//
+// Threading: send() and set_param() may be called from any thread; they
+// hold tx_mtx_, which also guards the descriptor against stop(). send()
+// encodes into a bounded transmit buffer and makes one non-blocking write()
+// when the buffer was empty; what the tty did not take stays buffered and is
+// written by the IO thread on POLLOUT, so a short write never splits a frame
+// from its successor. One IO thread per driver polls the tty and an eventfd
+// (stop and "flush me" wake-ups), reads what arrived, feeds the decoder and
+// calls the handler. A hangup (pty master closed, USB adapter unplugged:
+// POLLHUP, EOF, EIO, ENODEV) ends the thread after one on_failure.
+
+#include <fcntl.h>
+#include <poll.h>
+#include <pthread.h>
+#include <sys/eventfd.h>
+#include <sys/file.h>
+#include <sys/ioctl.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <mutex>
+#include <string>
+#include <system_error>
+#include <thread>
+#include <vector>
+
 #include "actors/runtime/error.hpp"
+#include "channels/drivers/serial_framing.hpp"
+#include "channels/drivers/serial_settings.hpp"
+#include "channels/link_driver.hpp"
+#include "channels/options.hpp"
+
 namespace herm {
+
 namespace {
-caf::expected<link_driver_ptr> open_serial(const device_config&) {
-  return make_error(ec::unknown_link_kind, "serial: not built yet");
+
+// -- constants -------------------------------------------------------------------
+
+/// Address of the other end of the line.
+constexpr link_addr peer_addr = 1;
+
+/// Address of this end.
+constexpr link_addr self_addr = 0;
+
+/// Frames of MTU size the transmit buffer holds on top of the kernel's.
+constexpr size_t tx_buffer_frames = 16;
+
+/// Bytes read per read() call.
+constexpr size_t rx_chunk = 4096;
+
+// -- helpers ---------------------------------------------------------------------
+
+std::string errno_text(int err) {
+  // std::strerror is not thread-safe; the generic category is.
+  return std::error_code(err, std::generic_category()).message();
 }
+
+int64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+}
+
+/// The termios constant of a standard rate (serial::standard_bauds).
+speed_t to_speed(uint64_t baud) {
+  switch (baud) {
+    case 1200: return B1200;
+    case 1800: return B1800;
+    case 2400: return B2400;
+    case 4800: return B4800;
+    case 9600: return B9600;
+    case 19200: return B19200;
+    case 38400: return B38400;
+    case 57600: return B57600;
+    case 115200: return B115200;
+    case 230400: return B230400;
+    case 460800: return B460800;
+    case 500000: return B500000;
+    case 576000: return B576000;
+    case 921600: return B921600;
+    case 1000000: return B1000000;
+    case 1152000: return B1152000;
+    case 1500000: return B1500000;
+    case 2000000: return B2000000;
+    case 2500000: return B2500000;
+    case 3000000: return B3000000;
+    case 3500000: return B3500000;
+    case 4000000: return B4000000;
+    default: return B0;
+  }
+}
+
+/// Nanoseconds one character occupies the line.
+int64_t char_time_ns(const serial::char_format& fmt, uint64_t baud) {
+  return static_cast<int64_t>((fmt.bits_per_char() * 1'000'000'000ull + baud
+                               - 1)
+                              / baud);
+}
+
+/// Owns one file descriptor.
+class unique_fd {
+public:
+  explicit unique_fd(int fd = -1) : fd_(fd) {
+  }
+  unique_fd(const unique_fd&) = delete;
+  unique_fd& operator=(const unique_fd&) = delete;
+  ~unique_fd() {
+    if (fd_ >= 0)
+      ::close(fd_);
+  }
+  int get() const {
+    return fd_;
+  }
+  int release() {
+    return std::exchange(fd_, -1);
+  }
+
+private:
+  int fd_;
+};
+
+/// Applies raw mode, speed, character format and flow control to `fd`.
+/// Returns 0 or an errno value; sets `what` to the setting that did not take.
+int apply_termios(int fd, const serial::settings& set, std::string& what) {
+  termios tio;
+  if (::tcgetattr(fd, &tio) != 0) {
+    what = "cannot read the terminal settings";
+    return errno;
+  }
+  ::cfmakeraw(&tio);
+  tio.c_cflag |= CLOCAL | CREAD;
+  tio.c_cflag &= ~static_cast<tcflag_t>(CSIZE | PARENB | PARODD | CSTOPB
+                                        | CRTSCTS);
+  tio.c_cflag |= CS8;
+  if (set.format.par != serial::parity::none) {
+    tio.c_cflag |= PARENB;
+    if (set.format.par == serial::parity::odd)
+      tio.c_cflag |= PARODD;
+    // A byte with a parity error reads as 0x00 (neither IGNPAR nor PARMRK):
+    // it ends the damaged frame, which then fails its CRC.
+    tio.c_iflag |= INPCK;
+  }
+  if (set.format.stop_bits == 2)
+    tio.c_cflag |= CSTOPB;
+  tio.c_iflag &= ~static_cast<tcflag_t>(IXON | IXOFF | IXANY);
+  if (set.flow == serial::flow_control::rtscts)
+    tio.c_cflag |= CRTSCTS;
+  if (set.flow == serial::flow_control::xonxoff) {
+    tio.c_iflag |= IXON | IXOFF;
+    tio.c_cc[VSTART] = serial::xon;
+    tio.c_cc[VSTOP] = serial::xoff;
+  }
+  // poll() reports input from one byte on; reads never wait (O_NONBLOCK).
+  tio.c_cc[VMIN] = 1;
+  tio.c_cc[VTIME] = 0;
+  auto speed = to_speed(set.baud);
+  if (::cfsetispeed(&tio, speed) != 0 || ::cfsetospeed(&tio, speed) != 0) {
+    what = "cannot set " + std::to_string(set.baud) + " baud";
+    return errno;
+  }
+  if (::tcsetattr(fd, TCSANOW, &tio) != 0) {
+    what = "cannot apply the terminal settings";
+    return errno;
+  }
+  // tcsetattr succeeds if any change took: check the ones that matter.
+  termios got;
+  if (::tcgetattr(fd, &got) != 0) {
+    what = "cannot read the terminal settings";
+    return errno;
+  }
+  if (::cfgetospeed(&got) != speed || ::cfgetispeed(&got) != speed) {
+    what = "the line does not support " + std::to_string(set.baud) + " baud";
+    return EINVAL;
+  }
+  if ((got.c_cflag & CSIZE) != CS8
+      || (got.c_cflag & (PARENB | PARODD)) != (tio.c_cflag & (PARENB | PARODD))
+      || (got.c_cflag & CSTOPB) != (tio.c_cflag & CSTOPB)) {
+    what = "the line does not support framing " + to_string(set.format);
+    return EINVAL;
+  }
+  if ((got.c_cflag & CRTSCTS) != (tio.c_cflag & CRTSCTS)) {
+    what = "the line does not support RTS/CTS flow control";
+    return EINVAL;
+  }
+  return 0;
+}
+
+// -- the driver ------------------------------------------------------------------
+
+class serial_driver final : public link_driver {
+public:
+  /// Takes ownership of `fd` (the configured tty) and `wake_fd` (eventfd).
+  serial_driver(serial::settings set, int fd, int wake_fd)
+    : set_(std::move(set)),
+      prefix_("device '" + set_.device + "': "),
+      fd_(fd),
+      wake_fd_(wake_fd),
+      tx_capacity_(tx_buffer_frames
+                   * serial::max_wire_size(set_.profile.mtu, set_.escaped())),
+      baud_(set_.baud),
+      bandwidth_(set_.profile.bandwidth_bps),
+      char_ns_(char_time_ns(set_.format, set_.baud)) {
+    tx_.reserve(tx_capacity_);
+  }
+
+  /// Must not run on the IO thread (i.e. the handler must not drop the last
+  /// reference to its driver).
+  ~serial_driver() override {
+    stop();
+  }
+
+  // -- link_driver -------------------------------------------------------------
+
+  caf::error start(std::shared_ptr<frame_handler> handler) override {
+    std::lock_guard<std::mutex> guard{life_mtx_};
+    if (state_ != state::opened)
+      return fail(ec::device_unavailable, state_ == state::running
+                                            ? "already started"
+                                            : "already stopped");
+    if (!handler)
+      return fail(ec::invalid_parameter, "start needs a frame handler");
+    handler_ = std::move(handler);
+    try {
+      thread_ = std::thread{[this] { run(); }};
+    } catch (const std::system_error& ex) {
+      handler_.reset();
+      return fail(ec::device_unavailable,
+                  std::string{"cannot start the IO thread: "} + ex.what());
+    }
+    state_ = state::running;
+    return caf::none;
+  }
+
+  /// Joins the IO thread and closes the line. Bytes not yet on the wire
+  /// (driver buffer and kernel output queue) are discarded, so that closing
+  /// never waits for a stalled line.
+  void stop() override {
+    std::lock_guard<std::mutex> guard{life_mtx_};
+    if (state_ == state::stopped)
+      return;
+    stopping_ = true;
+    if (thread_.joinable()) {
+      if (thread_.get_id() == std::this_thread::get_id())
+        return; // Called from a handler: the loop ends after this callback.
+      wake();
+      thread_.join();
+    }
+    handler_.reset();
+    {
+      std::lock_guard<std::mutex> tx_guard{tx_mtx_};
+      tx_.clear();
+      tx_head_ = 0;
+      // Errors are irrelevant here (e.g. the line hung up already).
+      ::tcflush(fd_, TCIOFLUSH);
+      if (set_.exclusive)
+        ::ioctl(fd_, TIOCNXCL);
+      ::close(fd_); // also releases the flock
+      fd_ = -1;
+    }
+    ::close(wake_fd_);
+    wake_fd_ = -1;
+    state_ = state::stopped;
+  }
+
+  caf::error send(link_addr dst, const uint8_t* data, size_t size,
+                  uint8_t) override {
+    if (size > set_.profile.mtu)
+      return fail(ec::packet_too_large,
+                  "frame of " + std::to_string(size)
+                    + " bytes exceeds the MTU of "
+                    + std::to_string(set_.profile.mtu) + " bytes");
+    if (size == 0)
+      return fail(ec::invalid_parameter,
+                  "refusing to send an empty frame (receivers take it for "
+                  "an idle line)");
+    if (dst != peer_addr && dst != broadcast_addr)
+      return fail(ec::invalid_address,
+                  "a serial line reaches only its peer (1), not "
+                    + format_addr(dst));
+    std::lock_guard<std::mutex> guard{tx_mtx_};
+    if (fd_ < 0)
+      return fail(ec::device_failed, "device is stopped");
+    if (failed_.load())
+      return fail(ec::device_failed, "serial line " + set_.path + " has failed");
+    auto pending = tx_.size() - tx_head_;
+    auto now = now_ns();
+    // Line idle (nothing of ours still being clocked out): lead with a
+    // delimiter so that the receiver drops whatever noise came before.
+    bool idle = pending == 0 && now >= busy_until_;
+    auto old_size = tx_.size();
+    auto n = serial::append_frame(tx_, data, size, idle, set_.escaped());
+    if (pending + n > tx_capacity_) {
+      tx_.resize(old_size);
+      ++tx_queue_full_;
+      return fail(ec::queue_full, "transmit buffer full ("
+                                    + std::to_string(pending)
+                                    + " bytes waiting for the line)");
+    }
+    busy_until_ = std::max(now, busy_until_)
+                  + static_cast<int64_t>(n) * char_ns_.load();
+    ++tx_frames_;
+    tx_bytes_ += n;
+    if (pending > 0)
+      return caf::none; // The IO thread is already waiting for POLLOUT.
+    auto err = write_pending();
+    if (err != 0 && err != EAGAIN)
+      return fail(ec::device_failed,
+                  "serial line " + set_.path + ": " + errno_text(err));
+    if (tx_head_ < tx_.size())
+      wake(); // Poll for POLLOUT from now on.
+    return caf::none;
+  }
+
+  const link_profile& profile() const override {
+    return set_.profile;
+  }
+
+  link_addr local_addr() const override {
+    return self_addr;
+  }
+
+  std::string format_addr(link_addr addr) const override {
+    switch (addr) {
+      case self_addr: return "local";
+      case peer_addr: return "peer";
+      case broadcast_addr: return "*";
+      default: return "invalid(" + std::to_string(addr) + ")";
+    }
+  }
+
+  caf::expected<link_addr> parse_addr(const std::string& str) const override {
+    if (str == "peer" || str == "1")
+      return peer_addr;
+    return fail(ec::invalid_address,
+                "'" + str
+                  + "' is not an address on a serial line (the other end is "
+                    "'peer' or '1')");
+  }
+
+  caf::error set_param(const std::string& key,
+                       const std::string& value) override {
+    if (key != "baud")
+      return fail(ec::invalid_parameter,
+                  "parameter '" + key
+                    + "' cannot be changed on a serial link (changeable: "
+                      "baud)");
+    // Parse through option_reader so errors read like option errors.
+    device_config tmp{set_.device, "serial", set_.path, {{key, value}}};
+    option_reader opts{tmp};
+    auto baud = serial::read_baud(opts, key, 0);
+    if (!baud)
+      return baud.error();
+    std::lock_guard<std::mutex> guard{tx_mtx_};
+    if (fd_ < 0)
+      return fail(ec::device_failed, "device is stopped");
+    auto copy = set_;
+    copy.baud = *baud;
+    std::string what;
+    if (auto err = apply_termios(fd_, copy, what))
+      return fail(ec::device_failed,
+                  "serial line " + set_.path + ": " + what + ": "
+                    + errno_text(err));
+    baud_ = *baud;
+    char_ns_ = char_time_ns(set_.format, *baud);
+    if (set_.bandwidth_follows_baud)
+      bandwidth_ = *baud;
+    return caf::none;
+  }
+
+  caf::expected<std::string> get_param(const std::string& key) const override {
+    if (key == "baud")
+      return std::to_string(baud_.load());
+    if (key == "bandwidth")
+      return std::to_string(bandwidth_.load());
+    if (key == "framing")
+      return to_string(set_.format);
+    if (key == "flow")
+      return std::string{to_string(set_.flow)};
+    if (key == "path")
+      return set_.path;
+    if (key == "exclusive")
+      return std::string{set_.exclusive ? "true" : "false"};
+    if (key == "bits_per_char")
+      return std::to_string(set_.format.bits_per_char());
+    if (key == "tx_frames")
+      return std::to_string(tx_frames_.load());
+    if (key == "tx_bytes")
+      return std::to_string(tx_bytes_.load());
+    if (key == "tx_queue_full")
+      return std::to_string(tx_queue_full_.load());
+    if (key == "tx_queued") {
+      std::lock_guard<std::mutex> guard{tx_mtx_};
+      return std::to_string(tx_.size() - tx_head_);
+    }
+    if (key == "rx_frames")
+      return std::to_string(rx_frames_.load());
+    if (key == "rx_bytes")
+      return std::to_string(rx_bytes_.load());
+    if (key == "rx_idle")
+      return std::to_string(rx_idle_.load());
+    if (key == "rx_malformed") {
+      uint64_t sum = 0;
+      for (auto& x : rx_errors_)
+        sum += x.load();
+      return std::to_string(sum);
+    }
+    static constexpr std::pair<const char*, serial::rx_error> errors[] = {
+      {"rx_bad_cobs", serial::rx_error::bad_cobs},
+      {"rx_too_short", serial::rx_error::too_short},
+      {"rx_oversized", serial::rx_error::oversized},
+      {"rx_bad_crc", serial::rx_error::bad_crc},
+      {"rx_bad_escape", serial::rx_error::bad_escape},
+    };
+    for (auto& [name, code] : errors)
+      if (key == name)
+        return std::to_string(rx_errors_[static_cast<size_t>(code)].load());
+    return link_driver::get_param(key);
+  }
+
+private:
+  enum class state { opened, running, stopped };
+
+  caf::error fail(ec code, const std::string& what) const {
+    return make_error(code, prefix_ + what);
+  }
+
+  void wake() {
+    uint64_t one = 1;
+    // An eventfd write of 1 cannot fail short of overflow.
+    [[maybe_unused]] auto res = ::write(wake_fd_, &one, sizeof(one));
+  }
+
+  /// Writes buffered bytes until the tty takes no more. Returns 0, EAGAIN
+  /// (bytes remain) or the errno of a failed write. Requires tx_mtx_.
+  int write_pending() {
+    while (tx_head_ < tx_.size()) {
+      auto res = ::write(fd_, tx_.data() + tx_head_, tx_.size() - tx_head_);
+      if (res < 0) {
+        if (errno == EINTR)
+          continue;
+        return errno == EWOULDBLOCK ? EAGAIN : errno;
+      }
+      if (res == 0)
+        return EAGAIN;
+      tx_head_ += static_cast<size_t>(res);
+    }
+    tx_.clear();
+    tx_head_ = 0;
+    return 0;
+  }
+
+  // -- IO thread -------------------------------------------------------------------
+
+  void run() {
+    pthread_setname_np(pthread_self(), "herm-serial");
+    serial::decoder dec{set_.profile.mtu, set_.escaped()};
+    std::vector<uint8_t> buf(rx_chunk);
+    while (!stopping_) {
+      short events = POLLIN;
+      {
+        std::lock_guard<std::mutex> guard{tx_mtx_};
+        if (tx_head_ < tx_.size())
+          events |= POLLOUT;
+      }
+      pollfd fds[2] = {{fd_, events, 0}, {wake_fd_, POLLIN, 0}};
+      if (::poll(fds, 2, -1) < 0) {
+        if (errno == EINTR)
+          continue;
+        report_failure("poll failed: " + errno_text(errno));
+        return;
+      }
+      if (fds[1].revents != 0) {
+        uint64_t count;
+        [[maybe_unused]] auto n = ::read(wake_fd_, &count, sizeof(count));
+        if (stopping_)
+          return;
+      }
+      auto ev = fds[0].revents;
+      if ((ev & POLLNVAL) != 0) {
+        report_failure(errno_text(EBADF));
+        return;
+      }
+      // Input first: bytes that arrived before a hangup are delivered.
+      if ((ev & (POLLIN | POLLHUP | POLLERR)) != 0 && !read_input(dec, buf))
+        return;
+      if ((ev & POLLOUT) != 0) {
+        int err;
+        {
+          std::lock_guard<std::mutex> guard{tx_mtx_};
+          err = write_pending();
+        }
+        if (err != 0 && err != EAGAIN) {
+          report_failure(errno_text(err));
+          return;
+        }
+      }
+      if ((ev & (POLLHUP | POLLERR)) != 0) {
+        report_failure("hangup");
+        return;
+      }
+    }
+  }
+
+  /// Reads until the tty has nothing more. False after a failure (reported).
+  bool read_input(serial::decoder& dec, std::vector<uint8_t>& buf) {
+    auto on_frame = [this](const uint8_t* data, size_t size) {
+      ++rx_frames_;
+      if (!stopping_)
+        handler_->on_frame(peer_addr, data, size);
+    };
+    auto on_malformed = [this](serial::rx_error why) {
+      ++rx_errors_[static_cast<size_t>(why)];
+      if (!stopping_)
+        handler_->on_malformed(self_addr, to_string(why));
+    };
+    while (!stopping_) {
+      auto n = ::read(fd_, buf.data(), buf.size());
+      if (n > 0) {
+        rx_bytes_ += static_cast<uint64_t>(n);
+        dec.feed(buf.data(), static_cast<size_t>(n), on_frame, on_malformed);
+        rx_idle_.store(dec.stats().idle);
+        continue;
+      }
+      if (n == 0) { // a hung-up tty reads as end of file
+        report_failure("hangup");
+        return false;
+      }
+      auto err = errno;
+      if (err == EAGAIN || err == EWOULDBLOCK)
+        return true;
+      if (err == EINTR)
+        continue;
+      report_failure(errno_text(err));
+      return false;
+    }
+    return true;
+  }
+
+  /// Reports the end of the line once; the IO thread ends right after.
+  void report_failure(const std::string& what) {
+    if (failed_.exchange(true) || stopping_)
+      return;
+    handler_->on_failure(
+      fail(ec::device_failed, "serial line " + set_.path + ": " + what));
+  }
+
+  // -- state -----------------------------------------------------------------------
+
+  const serial::settings set_;
+  const std::string prefix_; // "device 'NAME': "
+
+  /// Guards fd_ against closing, the transmit buffer and the line timing.
+  mutable std::mutex tx_mtx_;
+  int fd_;
+  int wake_fd_;
+  /// Encoded bytes not yet taken by the tty: tx_[tx_head_ ..).
+  std::vector<uint8_t> tx_;
+  size_t tx_head_ = 0;
+  const size_t tx_capacity_;
+  /// When the line will have clocked out everything written so far (an
+  /// estimate from the baud rate, CLOCK_MONOTONIC ns).
+  int64_t busy_until_ = 0;
+
+  // Run-time parameters (set_param).
+  std::atomic<uint64_t> baud_;
+  std::atomic<uint64_t> bandwidth_;
+  std::atomic<int64_t> char_ns_;
+
+  // Lifecycle.
+  std::mutex life_mtx_;
+  state state_ = state::opened;
+  std::atomic<bool> stopping_{false};
+  std::atomic<bool> failed_{false};
+  std::thread thread_;
+  std::shared_ptr<frame_handler> handler_;
+
+  // Counters (get_param).
+  std::atomic<uint64_t> tx_frames_{0};
+  std::atomic<uint64_t> tx_bytes_{0};
+  std::atomic<uint64_t> tx_queue_full_{0};
+  std::atomic<uint64_t> rx_frames_{0};
+  std::atomic<uint64_t> rx_bytes_{0};
+  std::atomic<uint64_t> rx_idle_{0};
+  std::atomic<uint64_t> rx_errors_[serial::rx_error_count] = {};
+};
+
+// -- open ----------------------------------------------------------------------
+
+caf::expected<link_driver_ptr> open_serial(const device_config& cfg) {
+  auto set = serial::read_settings(cfg);
+  if (!set)
+    return set.error();
+  auto& path = set->path;
+  auto fail = [&](const std::string& what) {
+    return make_error(ec::device_unavailable, "device '" + cfg.name
+                                                + "': serial line " + path
+                                                + ": " + what);
+  };
+  auto in_use = "in use (another process holds it exclusively)";
+  unique_fd fd{::open(path.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC)};
+  if (fd.get() < 0) {
+    auto err = errno;
+    return fail(err == EBUSY ? std::string{in_use} : errno_text(err));
+  }
+  if (!::isatty(fd.get()))
+    return fail("not a terminal");
+  // Root may open a tty despite TIOCEXCL: ask whether somebody holds it.
+  int held = 0;
+  if (::ioctl(fd.get(), TIOCGEXCL, &held) == 0 && held != 0)
+    return fail(in_use);
+  // Among HERM drivers (root or not), an advisory lock says who has it.
+  if (::flock(fd.get(), (set->exclusive ? LOCK_EX : LOCK_SH) | LOCK_NB) != 0) {
+    auto err = errno;
+    return fail(err == EWOULDBLOCK ? std::string{in_use}
+                                   : "cannot lock: " + errno_text(err));
+  }
+  if (set->exclusive && ::ioctl(fd.get(), TIOCEXCL) != 0)
+    return fail("cannot make exclusive (TIOCEXCL): " + errno_text(errno));
+  auto release_excl = [&] {
+    if (set->exclusive)
+      ::ioctl(fd.get(), TIOCNXCL);
+  };
+  std::string what;
+  if (auto err = apply_termios(fd.get(), *set, what)) {
+    release_excl();
+    return fail(what + ": " + errno_text(err));
+  }
+  // Whatever arrived before the line was configured is noise.
+  ::tcflush(fd.get(), TCIOFLUSH);
+  unique_fd wake{::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)};
+  if (wake.get() < 0) {
+    release_excl();
+    return fail("cannot create an eventfd: " + errno_text(errno));
+  }
+  auto drv = std::make_shared<serial_driver>(std::move(*set), fd.get(),
+                                             wake.get());
+  fd.release();
+  wake.release();
+  return link_driver_ptr{std::move(drv)};
+}
+
 } // namespace
+
 const link_kind& serial_link_kind() {
-  static const link_kind kind{"serial", "placeholder", open_serial};
+  static const link_kind kind{
+    "serial",
+    "serial line (RS232C, USB serial, USB CDC-ACM): COBS frames with CRC-16",
+    open_serial};
   return kind;
 }
+
 } // namespace herm
