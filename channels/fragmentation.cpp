@@ -199,6 +199,8 @@ struct packet {
   uint32_t frames = 0;
   uint32_t received = 0;
   uint32_t lowest_missing = 0;
+  /// Highest frame index received so far.
+  uint32_t highest = 0;
   bool wide = false;
 
   uint32_t stream_size() const noexcept {
@@ -276,7 +278,10 @@ placement place(packet& p, uint32_t seq, const uint8_t* bytes, size_t size) {
   // A copy of a frame that arrived moments ago maps one modulus ahead of the
   // original (the window has moved past it). Recognise it by its bytes so
   // that a repeated frame costs nothing instead of the whole packet.
-  if (index >= modulus) {
+  // Only a frame that would land beyond the next expected one can be such
+  // a copy: an in-order frame equal to the one a modulus back (a payload
+  // repeating every 16 frames, e.g. zeros) is not.
+  if (index >= modulus && index > p.highest + 1) {
     auto prev = index - modulus;
     if (prev < p.frames && p.has(prev) && size == p.size_of(prev)
         && (index >= p.frames || !p.has(index))
@@ -290,6 +295,7 @@ placement place(packet& p, uint32_t seq, const uint8_t* bytes, size_t size) {
   std::memcpy(p.buf.data() + p.offset_of(index), bytes, size);
   p.mark(index);
   ++p.received;
+  p.highest = std::max(p.highest, index);
   while (p.lowest_missing < p.frames && p.has(p.lowest_missing))
     ++p.lowest_missing;
   return placement::placed;
@@ -568,9 +574,16 @@ struct reassembler::impl {
     bytes += need;
     ++s.packet_count;
     ++pending;
+    auto* hist = find_history(src);
     for (auto& e : early) {
       if (e.wide != wide) {
         ++stats.malformed;
+        continue;
+      }
+      // A stashed fragment identical to a frame of this tag's previous
+      // packet is a late copy of it, not an early fragment of this one.
+      if (hist != nullptr && hist->tags[tag].contains(frame_hash(tag, e))) {
+        ++stats.duplicates;
         continue;
       }
       switch (place(p, e.seq, e.bytes.data(), e.bytes.size())) {
@@ -668,47 +681,110 @@ struct reassembler::impl {
               byte_buffer& out) {
     if (size == 0 || data == nullptr)
       return malformed();
-    if (data[0] >> 6 == type_single)
+    auto tag = static_cast<uint8_t>(data[0] >> 4 & 0x03);
+    if (data[0] >> 6 == type_single) {
+      if (auto* hist = find_history(src))
+        hist->started(tag);
       return on_single(data, size, out);
-    // A frame identical to one of the sender's last few fragmented frames is
-    // a duplicate, even when its packet is complete already (it would
-    // otherwise wait as an early fragment and spoil the next packet with
-    // the same tag). A legitimate identical frame needs the same tag and
-    // sequence number: at least 8 frames later.
+    }
+    // A copy of a frame of the tag's last completed packet, arriving when no
+    // packet with that tag is in progress, is a late duplicate: taken for an
+    // early fragment it would spoil the tag's next packet. A legitimately
+    // repeated packet (same bytes, same tag) comes only after the sender
+    // started packets with each of the three other tags, so a match counts
+    // as a duplicate only until then.
     auto hash = std::hash<std::string_view>{}(
       std::string_view{reinterpret_cast<const char*>(data), size});
-    if (auto* ring = find_ring(src); ring != nullptr && ring->contains(hash)) {
-      ++stats.duplicates;
-      return result::dropped;
+    auto si = senders.find(src);
+    bool in_progress = si != senders.end() && si->second.packets[tag];
+    if (auto* hist = find_history(src); hist != nullptr) {
+      auto& h = hist->tags[tag];
+      if (h.completed && !in_progress && !hist->moved_on(tag)
+          && h.contains(hash)) {
+        ++stats.duplicates;
+        return result::dropped;
+      }
     }
-    auto res = data[0] >> 6 == type_first
-                 ? on_first(src, data, size, now, out)
-                 : on_consecutive(src, data, size, now, out);
+    bool first = data[0] >> 6 == type_first;
+    auto res = first ? on_first(src, data, size, now, out)
+                     : on_consecutive(src, data, size, now, out);
     // Remember only frames that were taken: refusing allocates nothing.
-    if (res != result::dropped)
-      recent_ring(src).add(hash);
+    if (res != result::dropped) {
+      auto& hist = history(src);
+      auto& h = hist.tags[tag];
+      if (first) {
+        hist.started(tag);
+        h = tag_history{};
+        h.first = hash;
+        h.completed = res == result::complete;
+      } else if (in_progress) {
+        // Only frames placed into a packet belong to its history; a stashed
+        // early fragment does not (yet).
+        h.add(hash);
+        h.completed = res == result::complete;
+      }
+    }
     return res;
   }
 
-  /// Hashes of a sender's most recent fragmented frames.
-  struct recent_frames {
-    static constexpr size_t capacity = 7;
-    std::array<size_t, capacity> hashes{};
+  /// The hash push() computes for the frame a stash entry came from.
+  static size_t frame_hash(uint8_t tag, const stash_entry& e) {
+    uint8_t hdr[2];
+    size_t n;
+    if (e.wide) {
+      hdr[0] = static_cast<uint8_t>(type_wide << 6 | tag << 4 | (e.seq >> 8 & 0x0F));
+      hdr[1] = static_cast<uint8_t>(e.seq & 0xFF);
+      n = 2;
+    } else {
+      hdr[0] = static_cast<uint8_t>(2 << 6 | tag << 4 | (e.seq & 0x0F));
+      n = 1;
+    }
+    std::string frame(reinterpret_cast<const char*>(hdr), n);
+    frame.append(reinterpret_cast<const char*>(e.bytes.data()), e.bytes.size());
+    return std::hash<std::string_view>{}(frame);
+  }
+
+  /// Hashes of the frames of one tag's current or last packet: its first
+  /// frame and its last 16 consecutive frames.
+  struct tag_history {
+    static constexpr size_t capacity = 16;
+    size_t first = 0;
+    std::array<size_t, capacity> tail{};
     uint8_t next = 0;
     uint8_t count = 0;
+    bool completed = false;
 
     bool contains(size_t h) const noexcept {
+      if (h == first)
+        return true;
       for (size_t i = 0; i < count; ++i)
-        if (hashes[i] == h)
+        if (tail[i] == h)
           return true;
       return false;
     }
 
     void add(size_t h) noexcept {
-      hashes[next] = h;
+      tail[next] = h;
       next = static_cast<uint8_t>((next + 1) % capacity);
       if (count < capacity)
         ++count;
+    }
+  };
+
+  struct sender_history {
+    std::array<tag_history, 4> tags;
+    /// Per tag: the other tags whose packets started since its last one.
+    std::array<uint8_t, 4> seen_since{};
+
+    void started(uint8_t tag) noexcept {
+      for (uint8_t t = 0; t < 4; ++t)
+        seen_since[t] |= static_cast<uint8_t>(1u << tag);
+      seen_since[tag] = 0;
+    }
+
+    /// True once packets with every other tag started after `tag`'s last.
+    bool moved_on(uint8_t tag) const noexcept {
+      return (seen_since[tag] | (1u << tag)) == 0x0F;
     }
   };
 
@@ -716,31 +792,31 @@ struct reassembler::impl {
   /// duplicate, which the window and the CRC still catch.
   static constexpr size_t max_recent_senders = 4096;
 
-  recent_frames* find_ring(link_addr src) {
-    if (last_ring != nullptr && last_src == src)
-      return last_ring;
+  sender_history* find_history(link_addr src) {
+    if (last_hist != nullptr && last_src == src)
+      return last_hist;
     auto i = recent.find(src);
     if (i == recent.end())
       return nullptr;
     last_src = src;
-    return last_ring = &i->second;
+    return last_hist = &i->second;
   }
 
-  recent_frames& recent_ring(link_addr src) {
-    if (auto* ring = find_ring(src))
-      return *ring;
+  sender_history& history(link_addr src) {
+    if (auto* h = find_history(src))
+      return *h;
     if (recent.size() >= max_recent_senders) {
       recent.clear();
-      last_ring = nullptr;
+      last_hist = nullptr;
     }
     last_src = src;
     // References into an unordered_map survive rehashing.
-    return *(last_ring = &recent[src]);
+    return *(last_hist = &recent[src]);
   }
 
-  std::unordered_map<link_addr, recent_frames> recent;
+  std::unordered_map<link_addr, sender_history> recent;
   link_addr last_src = 0;
-  recent_frames* last_ring = nullptr;
+  sender_history* last_hist = nullptr;
 
   // -- time ----------------------------------------------------------------------
 

@@ -15,6 +15,7 @@
 #include "channels/device_actor.hpp"
 #include "channels/io_manager.hpp"
 #include "channels/messages.hpp"
+#include "routing/routing_agent.hpp"
 
 CAF_BEGIN_TYPE_ID_BLOCK(herm, caf::first_custom_type_id)
 
@@ -40,5 +41,16 @@ CAF_BEGIN_TYPE_ID_BLOCK(herm, caf::first_custom_type_id)
   CAF_ADD_TYPE_ID(herm, (herm::device_actor))
   CAF_ADD_TYPE_ID(herm, (herm::io_listener_actor))
   CAF_ADD_TYPE_ID(herm, (herm::io_manager_actor))
+
+  // -- Network Adaptation Layer ----------------------------------------------------
+  CAF_ADD_TYPE_ID(herm, (herm::send_packet))
+  CAF_ADD_TYPE_ID(herm, (herm::packet_delivered))
+  CAF_ADD_TYPE_ID(herm, (herm::neighbour_info))
+  CAF_ADD_TYPE_ID(herm, (std::vector<herm::neighbour_info>))
+  CAF_ADD_TYPE_ID(herm, (herm::route_info))
+  CAF_ADD_TYPE_ID(herm, (std::vector<herm::route_info>))
+  CAF_ADD_TYPE_ID(herm, (herm::routing_stats))
+  CAF_ADD_TYPE_ID(herm, (herm::network_receiver_actor))
+  CAF_ADD_TYPE_ID(herm, (herm::routing_agent_actor))
 
 CAF_END_TYPE_ID_BLOCK(herm)

@@ -265,7 +265,10 @@ public:
 
   /// Consumes `data[0..size)`. Calls `on_frame(const uint8_t* frame,
   /// size_t size)` for each good frame (the pointer is valid during the call
-  /// only) and `on_malformed(rx_error)` for each bad one.
+  /// only) and `on_malformed(rx_error)` for each bad one. A bad escape or an
+  /// overflow is reported as soon as it is seen (the rest of the run up to
+  /// the next delimiter is then skipped); COBS, length and CRC are checked
+  /// at the delimiter.
   template <class OnFrame, class OnMalformed>
   void feed(const uint8_t* data, size_t size, OnFrame&& on_frame,
             OnMalformed&& on_malformed) {

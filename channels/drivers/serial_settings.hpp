@@ -20,7 +20,10 @@
 //   framing    DATA PARITY STOP: 8N1 (default), 8E1, 8O1, 8N2, 8E2, 8O2
 //   flow       none (default), rtscts, xonxoff
 //   exclusive  true (default): nobody else may open the line while the
-//              driver holds it
+//              driver holds it (TIOCEXCL, plus an flock that also stops root
+//              and other HERM drivers); false: other non-exclusive HERM
+//              drivers may share it. A line that another process holds
+//              exclusively is refused either way.
 
 #include <cstdint>
 #include <optional>
@@ -197,7 +200,9 @@ inline caf::expected<settings> read_settings(const device_config& cfg) {
   } else if (result.profile.mtu > max_mtu) {
     result.profile.mtu = max_mtu;
   }
-  auto profile_rate = result.profile.bandwidth_bps;
+  // The built-in profile's rate, before option "bandwidth" changed it.
+  auto* base = find_profile(result.profile.name);
+  auto profile_rate = base != nullptr ? base->bandwidth_bps : 0;
   bool explicit_baud = opts.has("baud");
   auto baud = read_baud(opts, "baud",
                         is_standard_baud(profile_rate) ? profile_rate

@@ -5,6 +5,7 @@
 #include <numeric>
 
 #include "tests/support/actor_fixture.hpp"
+#include "tests/support/null_frame_handler.hpp"
 
 #include "channels/drivers/inproc.hpp"
 #include "channels/fragmentation.hpp"
@@ -28,14 +29,6 @@ byte_buffer pattern(size_t n, uint8_t seed = 0) {
     buf[i] = static_cast<uint8_t>(seed + i * 7 + i / 251);
   return buf;
 }
-
-/// Swallows frames: for a raw station that only sends.
-struct null_handler : frame_handler {
-  void on_frame(link_addr, const uint8_t*, size_t) override {}
-  void on_malformed(link_addr, const char*) override {}
-  void on_event(link_event_kind, link_addr, std::string) override {}
-  void on_failure(caf::error) override {}
-};
 
 class nil_test : public test::actor_fixture {
 public:
@@ -84,7 +77,7 @@ public:
                        {"profile", profile}}};
     auto drv = find_link_kind("inproc")->open(cfg);
     EXPECT_TRUE(drv);
-    (*drv)->start(std::make_shared<null_handler>());
+    (*drv)->start(std::make_shared<test::null_frame_handler>());
     return *drv;
   }
 };

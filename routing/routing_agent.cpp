@@ -1,0 +1,623 @@
+#include "routing/routing_agent.hpp"
+
+#include <algorithm>
+#include <map>
+#include <random>
+
+#include "caf/actor_system.hpp"
+#include "caf/stateful_actor.hpp"
+#include "caf/typed_event_based_actor.hpp"
+
+#include "actors/runtime/error.hpp"
+#include "actors/runtime/type_ids.hpp"
+#include "routing/address_allocator.hpp"
+#include "routing/wire.hpp"
+
+namespace herm {
+
+namespace {
+
+using time_point = std::chrono::steady_clock::time_point;
+
+struct neighbour_state {
+  module_id id = no_module;
+  uint64_t instance = 0;
+  time_point last_hello;
+  std::chrono::milliseconds interval{0};
+};
+
+struct channel_state {
+  channel_actor handle;
+  channel_info info;
+  metric_vector cost = infinite_metrics;
+  link_code code = link_code::unknown;
+};
+
+struct agent_state {
+  static inline const char* name = "herm.routing";
+
+  routing_config cfg;
+  io_manager_actor io;
+  route_table table{no_module};
+  std::unique_ptr<address_allocator> alloc;
+  std::map<channel_id, channel_state> channels;
+  std::map<next_hop, neighbour_state> neighbours;
+  std::map<uint8_t, network_receiver_actor> receivers;
+  /// Floods seen recently (claims, conflicts, seqno requests), by key, with
+  /// the time they were last relayed; bounded.
+  std::map<std::tuple<uint8_t, uint64_t, uint64_t>, time_point> floods;
+  /// When a seqno request for a destination was last sent.
+  std::map<module_id, time_point> requested;
+  routing_stats stats;
+  uint16_t hello_seqno = 0;
+  uint32_t ticks = 0;
+  byte_buffer buf;
+
+  std::chrono::steady_clock::duration hold() const {
+    return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      cfg.hello_interval * cfg.update_every * cfg.hold_factor);
+  }
+};
+
+using agent_impl = routing_agent_actor::stateful_pointer<agent_state>;
+
+// -- sending --------------------------------------------------------------------
+
+void send_on(agent_impl self, channel_id ch, link_addr dst,
+             const byte_buffer& bytes, uint8_t prio = prio_control) {
+  auto i = self->state.channels.find(ch);
+  if (i != self->state.channels.end())
+    self->send(i->second.handle, write_packet{dst, prio, bytes});
+}
+
+void send_all(agent_impl self, const byte_buffer& bytes,
+              channel_id except = 0) {
+  for (auto& kv : self->state.channels)
+    if (kv.first != except)
+      self->send(kv.second.handle,
+                 write_packet{broadcast_addr, prio_control, bytes});
+}
+
+void send_hellos(agent_impl self) {
+  auto& st = self->state;
+  hello h{st.table.self(), st.alloc->instance(), st.hello_seqno++,
+          static_cast<uint16_t>(std::min<int64_t>(st.cfg.hello_interval.count(),
+                                                   0xFFFF))};
+  st.buf.clear();
+  encode(h, st.buf);
+  send_all(self, st.buf);
+  st.stats.tx_hellos += st.channels.size();
+}
+
+/// Advertises `dests` on every channel (or only `only` when not 0).
+void send_update(agent_impl self, const std::vector<module_id>& dests,
+                 channel_id only = 0) {
+  auto& st = self->state;
+  if (st.channels.empty())
+    return;
+  update u;
+  u.sender = st.table.self();
+  u.instance = st.alloc->instance();
+  auto flush = [&] {
+    if (u.entries.empty())
+      return;
+    st.buf.clear();
+    encode(u, st.buf);
+    if (only != 0)
+      send_on(self, only, broadcast_addr, st.buf);
+    else
+      send_all(self, st.buf);
+    st.stats.tx_updates += only != 0 ? 1 : st.channels.size();
+    st.stats.tx_update_entries += u.entries.size();
+    u.entries.clear();
+  };
+  for (auto d : dests) {
+    if (!is_unicast(d))
+      continue;
+    if (auto adv = st.table.advertisement(d)) {
+      u.entries.push_back(std::move(*adv));
+      if (u.entries.size() == max_update_entries)
+        flush();
+    }
+  }
+  flush();
+}
+
+void send_seqno_requests(agent_impl self, const std::vector<module_id>& dests) {
+  auto& st = self->state;
+  auto now = self->clock().now();
+  for (auto d : dests) {
+    // At most one request per destination per hello interval.
+    auto& last = st.requested[d];
+    if (last != time_point{} && now - last < st.cfg.hello_interval)
+      continue;
+    last = now;
+    auto adv = st.table.advertisement(d);
+    seqno_request req{st.table.self(), d,
+                      static_cast<seqno_t>((adv ? adv->seqno : 0) + 1),
+                      max_route_hops};
+    st.buf.clear();
+    encode(req, st.buf);
+    send_all(self, st.buf);
+    ++st.stats.tx_seqno_requests;
+  }
+}
+
+void apply_change(agent_impl self, const table_change& change) {
+  if (!change.changed.empty())
+    send_update(self, change.changed);
+  if (!change.starving.empty())
+    send_seqno_requests(self, change.starving);
+}
+
+// -- addressing -----------------------------------------------------------------
+
+void act(agent_impl self, address_allocator::actions acts) {
+  auto& st = self->state;
+  for (auto& c : acts.claims) {
+    st.buf.clear();
+    encode(c, st.buf);
+    send_all(self, st.buf);
+    ++st.stats.tx_claims;
+  }
+  for (auto& c : acts.conflicts) {
+    st.buf.clear();
+    encode(c, st.buf);
+    send_all(self, st.buf);
+    ++st.stats.tx_conflicts;
+  }
+  if (acts.renumbered_from) {
+    // Withdraw the old id: advertise it unreachable with a newer seqno.
+    advertised gone;
+    gone.origin = *acts.renumbered_from;
+    gone.seqno = static_cast<seqno_t>(st.table.own_seqno() + 1);
+    update u{st.table.self(), st.alloc->instance(), {gone}};
+    st.buf.clear();
+    encode(u, st.buf);
+    send_all(self, st.buf);
+    ++st.stats.renumberings;
+  }
+  if (acts.renumbered_from) {
+    st.stats.self = no_module;
+    st.stats.assigned = false;
+  }
+  if (acts.assigned) {
+    st.table.set_self(st.alloc->id());
+    st.table.bump_own_seqno();
+    st.stats.self = st.alloc->id();
+    st.stats.assigned = st.alloc->assigned();
+    send_update(self, {st.table.self()});
+  }
+}
+
+/// True if this flood was not relayed recently; records it.
+bool fresh_flood(agent_impl self, uint8_t type, uint64_t a, uint64_t b) {
+  auto& st = self->state;
+  auto now = self->clock().now();
+  auto key = std::make_tuple(type, a, b);
+  auto i = st.floods.find(key);
+  auto window = st.cfg.hello_interval / 2;
+  if (i != st.floods.end() && now - i->second < window)
+    return false;
+  if (st.floods.size() > 4096) {
+    // Forget floods older than the window; bounded memory.
+    for (auto j = st.floods.begin(); j != st.floods.end();)
+      j = now - j->second >= window ? st.floods.erase(j) : std::next(j);
+  }
+  st.floods[key] = now;
+  return true;
+}
+
+// -- receiving ------------------------------------------------------------------
+
+void deliver(agent_impl self, const data_header& h, const byte_buffer& bytes) {
+  auto& st = self->state;
+  auto i = st.receivers.find(h.protocol);
+  if (i == st.receivers.end()) {
+    ++st.stats.dropped_no_receiver;
+    return;
+  }
+  ++st.stats.delivered;
+  packet_delivered msg{h.src, h.protocol, h.priority,
+                       static_cast<uint8_t>(default_hop_limit - h.hop_limit),
+                       byte_buffer(bytes.begin() + data_header_size,
+                                   bytes.end())};
+  self->send(i->second, std::move(msg));
+}
+
+void forward(agent_impl self, const data_header& h, byte_buffer bytes) {
+  auto& st = self->state;
+  if (h.hop_limit <= 1) {
+    ++st.stats.dropped_hop_limit;
+    return;
+  }
+  auto nh = st.table.lookup(h.dst, h.size_class);
+  if (!nh) {
+    ++st.stats.dropped_no_route;
+    return;
+  }
+  set_hop_limit(bytes.data(), static_cast<uint8_t>(h.hop_limit - 1));
+  ++st.stats.forwarded;
+  auto i = st.channels.find(nh->channel);
+  if (i != st.channels.end())
+    self->send(i->second.handle,
+               write_packet{nh->neighbour, h.priority, std::move(bytes)});
+}
+
+void on_data(agent_impl self, byte_buffer bytes) {
+  auto& st = self->state;
+  auto h = decode_data_header(bytes.data(), bytes.size());
+  if (!h) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  if (st.cfg.observer)
+    st.cfg.observer(st.table.self(), *h, bytes);
+  if (h->dst == st.table.self() || h->dst == broadcast_module)
+    deliver(self, *h, bytes);
+  else
+    forward(self, *h, std::move(bytes));
+}
+
+void on_hello(agent_impl self, channel_id ch, link_addr src,
+              const byte_buffer& bytes) {
+  auto& st = self->state;
+  auto h = decode_hello(bytes.data(), bytes.size());
+  if (!h) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  auto ci = st.channels.find(ch);
+  if (ci == st.channels.end())
+    return;
+  auto now = self->clock().now();
+  next_hop nh{ch, src};
+  auto [i, added] = st.neighbours.try_emplace(nh);
+  auto& n = i->second;
+  bool restarted = !added && n.instance != h->instance;
+  n.id = h->sender;
+  n.instance = h->instance;
+  n.last_hello = now;
+  n.interval = std::chrono::milliseconds(h->interval_ms);
+  if (added || restarted) {
+    apply_change(self, st.table.set_neighbour(nh, ci->second.cost, ci->second.code));
+    // Tell the new neighbour everything we know at once.
+    send_update(self, st.table.destinations(), ch);
+  }
+  if (is_unicast(h->sender))
+    act(self, st.alloc->on_heard(h->sender, h->instance, now));
+}
+
+void on_update(agent_impl self, channel_id ch, link_addr src,
+               const byte_buffer& bytes) {
+  auto& st = self->state;
+  auto u = decode_update(bytes.data(), bytes.size());
+  if (!u) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  next_hop nh{ch, src};
+  if (st.neighbours.count(nh) == 0) {
+    ++st.stats.rx_unknown_neighbour;
+    return;
+  }
+  auto now = self->clock().now();
+  if (is_unicast(u->sender))
+    act(self, st.alloc->on_heard(u->sender, u->instance, now));
+  table_change change;
+  for (auto& e : u->entries) {
+    // Neighbours echo our own routes back to us: not an error.
+    if (e.origin == st.table.self())
+      continue;
+    if (!st.table.update(nh, e, now, st.hold(), change))
+      ++st.stats.rx_refused_routes;
+  }
+  std::sort(change.changed.begin(), change.changed.end());
+  change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
+                       change.changed.end());
+  std::sort(change.starving.begin(), change.starving.end());
+  change.starving.erase(
+    std::unique(change.starving.begin(), change.starving.end()),
+    change.starving.end());
+  apply_change(self, change);
+}
+
+void on_seqno_request(agent_impl self, channel_id ch, const byte_buffer& bytes) {
+  auto& st = self->state;
+  auto r = decode_seqno_request(bytes.data(), bytes.size());
+  if (!r) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  if (!fresh_flood(self, 3, r->origin, r->seqno))
+    return;
+  if (r->origin == st.table.self()) {
+    // Jump to the requested seqno (a module that restarted may be far
+    // behind what its neighbours remember), then advertise.
+    st.table.set_own_seqno(r->seqno);
+    send_update(self, {st.table.self()});
+    return;
+  }
+  if (r->hop_count <= 1)
+    return;
+  // Towards the origin along our selected route, if any.
+  auto nh = st.table.lookup(r->origin, 0);
+  if (!nh || nh->channel == ch)
+    return;
+  auto fwd = *r;
+  fwd.hop_count = static_cast<uint8_t>(r->hop_count - 1);
+  st.buf.clear();
+  encode(fwd, st.buf);
+  send_on(self, nh->channel, nh->neighbour, st.buf);
+}
+
+void on_claim(agent_impl self, channel_id ch, const byte_buffer& bytes) {
+  auto& st = self->state;
+  auto c = decode_claim(bytes.data(), bytes.size());
+  if (!c) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  if (c->instance == st.alloc->instance() || !fresh_flood(self, 4, c->id, c->nonce))
+    return;
+  if (c->nonce == c->instance)
+    act(self, st.alloc->on_heard(c->id, c->instance, self->clock().now()));
+  else
+    act(self, st.alloc->on_claim(*c, self->clock().now()));
+  if (c->hop_limit > 1) {
+    auto fwd = *c;
+    fwd.hop_limit = static_cast<uint8_t>(c->hop_limit - 1);
+    st.buf.clear();
+    encode(fwd, st.buf);
+    send_all(self, st.buf, ch);
+  }
+}
+
+void on_conflict(agent_impl self, channel_id ch, const byte_buffer& bytes) {
+  auto& st = self->state;
+  auto c = decode_conflict(bytes.data(), bytes.size());
+  if (!c) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  if (!fresh_flood(self, 5, c->id ^ (c->claim_nonce << 16),
+                   c->holder_instance ^ c->loser_instance))
+    return;
+  act(self, st.alloc->on_conflict(*c, self->clock().now()));
+  if (c->hop_limit > 1) {
+    auto fwd = *c;
+    fwd.hop_limit = static_cast<uint8_t>(c->hop_limit - 1);
+    st.buf.clear();
+    encode(fwd, st.buf);
+    send_all(self, st.buf, ch);
+  }
+}
+
+// -- timer ----------------------------------------------------------------------
+
+void tick(agent_impl self) {
+  auto& st = self->state;
+  auto now = self->clock().now();
+  send_hellos(self);
+  // Neighbours silent for too long are gone.
+  table_change change;
+  for (auto i = st.neighbours.begin(); i != st.neighbours.end();) {
+    auto interval = std::max(i->second.interval, st.cfg.hello_interval);
+    if (now - i->second.last_hello > interval * st.cfg.hello_loss) {
+      auto c = st.table.remove_neighbour(i->first);
+      change.changed.insert(change.changed.end(), c.changed.begin(),
+                            c.changed.end());
+      i = st.neighbours.erase(i);
+    } else {
+      ++i;
+    }
+  }
+  auto expired = st.table.expire(now);
+  change.changed.insert(change.changed.end(), expired.changed.begin(),
+                        expired.changed.end());
+  change.starving.insert(change.starving.end(), expired.starving.begin(),
+                         expired.starving.end());
+  std::sort(change.changed.begin(), change.changed.end());
+  change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
+                       change.changed.end());
+  apply_change(self, change);
+  if (auto due = st.alloc->next_deadline(); due && *due <= now)
+    act(self, st.alloc->tick(now));
+  if (++st.ticks % st.cfg.update_every == 0)
+    send_update(self, st.table.destinations());
+  if (st.cfg.id == no_module && st.alloc->assigned()
+      && st.ticks % st.cfg.announce_every == 0) {
+    // An announcement is a claim whose nonce is the claimant's instance (a
+    // fresh claim's nonce is random): receivers treat it as "this id is in
+    // use by that instance" and apply the merge rule.
+    claim announce{st.alloc->id(), st.alloc->instance(), st.alloc->instance(),
+                   default_hop_limit};
+    st.buf.clear();
+    encode(announce, st.buf);
+    send_all(self, st.buf);
+    ++st.stats.tx_claims;
+  }
+  self->delayed_send(self, st.cfg.hello_interval, atom::tick_v);
+}
+
+caf::error originate(agent_impl self, send_packet& msg) {
+  auto& st = self->state;
+  auto self_id = st.table.self();
+  if (!st.alloc->assigned())
+    return make_error(ec::no_route, "module has no address yet (claiming)");
+  data_header h;
+  h.src = self_id;
+  h.dst = msg.dst;
+  h.size_class = size_class_of(msg.payload.size());
+  h.priority = static_cast<uint8_t>(std::min<uint8_t>(msg.priority, 3));
+  h.protocol = msg.protocol;
+  byte_buffer bytes;
+  bytes.reserve(data_header_size + msg.payload.size());
+  encode(h, bytes);
+  bytes.insert(bytes.end(), msg.payload.begin(), msg.payload.end());
+  ++st.stats.originated;
+  if (msg.dst == self_id) {
+    deliver(self, h, bytes);
+    return caf::none;
+  }
+  if (!is_unicast(msg.dst))
+    return make_error(ec::no_route, "cannot send to " + to_hex(msg.dst));
+  if (!st.table.lookup(msg.dst, h.size_class)) {
+    ++st.stats.dropped_no_route;
+    return make_error(ec::no_route, "no route to module " + to_hex(msg.dst));
+  }
+  if (st.cfg.observer)
+    st.cfg.observer(self_id, h, bytes);
+  h.hop_limit = default_hop_limit + 1; // forward() takes one off
+  set_hop_limit(bytes.data(), h.hop_limit);
+  --st.stats.forwarded; // forward() counts it; we originated it
+  forward(self, h, std::move(bytes));
+  return caf::none;
+}
+
+routing_agent_actor::behavior_type agent_fun(agent_impl self,
+                                             io_manager_actor io,
+                                             routing_config cfg) {
+  auto& init = self->state;
+  init.cfg = std::move(cfg);
+  init.io = io;
+  uint64_t instance = init.cfg.instance;
+  uint64_t seed = init.cfg.seed;
+  if (instance == 0 || seed == 0) {
+    std::random_device rd;
+    if (instance == 0)
+      instance = (uint64_t{rd()} << 32) | rd() | 1;
+    if (seed == 0)
+      seed = (uint64_t{rd()} << 32) | rd();
+  }
+  address_allocator::config acfg;
+  acfg.static_id = init.cfg.id;
+  acfg.claim_interval = init.cfg.hello_interval;
+  init.alloc = std::make_unique<address_allocator>(acfg, instance, seed);
+  init.stats.instance = instance;
+  self->send(io, atom::subscribe_v, caf::actor_cast<io_listener_actor>(self));
+  act(self, init.alloc->start(self->clock().now()));
+  self->send(self, atom::tick_v);
+  return {
+    [self](send_packet& msg) { originate(self, msg); },
+    [self](atom::send, send_packet& msg) -> caf::result<void> {
+      if (auto err = originate(self, msg))
+        return err;
+      return caf::unit;
+    },
+    [self](atom::subscribe, uint8_t protocol, network_receiver_actor& rcv) {
+      self->state.receivers[protocol] = std::move(rcv);
+    },
+    [self](atom::get, atom::routes) -> std::vector<route_info> {
+      auto& st = self->state;
+      std::vector<route_info> result;
+      for (auto& r : st.table.rows()) {
+        route_info ri;
+        ri.destination = r.destination;
+        ri.size_class = r.size_class;
+        ri.channel = r.via.channel;
+        auto ci = st.channels.find(r.via.channel);
+        ri.neighbour = ci != st.channels.end() ? std::to_string(r.via.neighbour)
+                                               : "?";
+        ri.cost = r.cost;
+        ri.hops = r.hops;
+        for (auto code : r.path) {
+          if (!ri.forwarding.empty())
+            ri.forwarding += '-';
+          ri.forwarding += to_string(code);
+        }
+        ri.selected = r.selected;
+        ri.feasible = r.feasible;
+        result.push_back(std::move(ri));
+      }
+      return result;
+    },
+    [self](atom::get, atom::neighbors) -> std::vector<neighbour_info> {
+      auto& st = self->state;
+      auto now = self->clock().now();
+      std::vector<neighbour_info> result;
+      for (auto& [nh, n] : st.neighbours) {
+        neighbour_info ni;
+        ni.channel = nh.channel;
+        ni.link_address = std::to_string(nh.neighbour);
+        ni.id = n.id;
+        ni.instance = n.instance;
+        auto ci = st.channels.find(nh.channel);
+        if (ci != st.channels.end()) {
+          ni.link_kind = to_string(ci->second.code);
+          ni.cost.assign(ci->second.cost.begin(), ci->second.cost.end());
+        }
+        ni.last_heard_ms = static_cast<uint32_t>(
+          std::chrono::duration_cast<std::chrono::milliseconds>(now - n.last_hello)
+            .count());
+        result.push_back(std::move(ni));
+      }
+      return result;
+    },
+    [self](atom::get, atom::stats) -> routing_stats {
+      return self->state.stats;
+    },
+    [self](channel_up& up) {
+      auto& st = self->state;
+      channel_state cs;
+      cs.handle = up.handle;
+      cs.info = up.info;
+      cs.cost = link_metrics(up.info.profile);
+      cs.code = link_code_of(up.info.profile.name);
+      st.channels[up.info.id] = std::move(cs);
+      self->request(up.handle, caf::infinite, atom::subscribe_v,
+                    caf::actor_cast<channel_reader_actor>(self))
+        .then([](channel_info&) {}, [](caf::error&) {});
+      send_hellos(self);
+    },
+    [self](channel_down& down) {
+      auto& st = self->state;
+      st.channels.erase(down.id);
+      for (auto i = st.neighbours.begin(); i != st.neighbours.end();)
+        i = i->first.channel == down.id ? st.neighbours.erase(i) : std::next(i);
+      apply_change(self, st.table.remove_channel(down.id));
+    },
+    [self](packet_received& pkt) {
+      auto& st = self->state;
+      auto type = peek_type(pkt.bytes.data(), pkt.bytes.size());
+      if (!type) {
+        ++st.stats.rx_malformed;
+        return;
+      }
+      switch (*type) {
+        case packet_type::data:
+          on_data(self, std::move(pkt.bytes));
+          break;
+        case packet_type::hello:
+          on_hello(self, pkt.channel, pkt.src, pkt.bytes);
+          break;
+        case packet_type::update:
+          on_update(self, pkt.channel, pkt.src, pkt.bytes);
+          break;
+        case packet_type::seqno_request:
+          on_seqno_request(self, pkt.channel, pkt.bytes);
+          break;
+        case packet_type::claim:
+          on_claim(self, pkt.channel, pkt.bytes);
+          break;
+        case packet_type::conflict:
+          on_conflict(self, pkt.channel, pkt.bytes);
+          break;
+      }
+    },
+    [](link_event&) {
+      // Hellos, not link events, decide who is a neighbour.
+    },
+    [self](atom::tick) { tick(self); },
+  };
+}
+
+} // namespace
+
+routing_agent_actor spawn_routing_agent(caf::actor_system& sys,
+                                        io_manager_actor io,
+                                        routing_config cfg) {
+  return sys.spawn(agent_fun, std::move(io), std::move(cfg));
+}
+
+} // namespace herm

@@ -1,0 +1,178 @@
+#pragma once
+
+// Typed interface of the routing agent: one per module. It learns
+// neighbours from hellos on every channel the IO manager opens, runs the
+// route table (routing/route_table.hpp) and the address allocator, and
+// forwards data packets hop by hop (re-fragmented by each outgoing channel).
+
+#include <chrono>
+#include <functional>
+#include <vector>
+
+#include "caf/fwd.hpp"
+#include "caf/replies_to.hpp"
+#include "caf/typed_actor.hpp"
+
+#include "actors/runtime/atoms.hpp"
+#include "channels/io_manager.hpp"
+#include "channels/messages.hpp"
+#include "routing/module_id.hpp"
+#include "routing/route_table.hpp"
+#include "routing/wire.hpp"
+
+namespace herm {
+
+/// A data packet for another module.
+struct send_packet {
+  module_id dst = no_module;
+  uint8_t protocol = 0;
+  uint8_t priority = prio_normal;
+  byte_buffer payload;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, send_packet& x) {
+  return f(caf::meta::type_name("send_packet"), x.dst, x.protocol, x.priority,
+           x.payload);
+}
+
+/// A data packet for this module, handed to the receiver of its protocol.
+struct packet_delivered {
+  module_id src = no_module;
+  uint8_t protocol = 0;
+  uint8_t priority = prio_normal;
+  /// Hops the packet took.
+  uint8_t hops = 0;
+  byte_buffer payload;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, packet_delivered& x) {
+  return f(caf::meta::type_name("packet_delivered"), x.src, x.protocol,
+           x.priority, x.hops, x.payload);
+}
+
+/// One neighbour as the agent sees it.
+struct neighbour_info {
+  channel_id channel = 0;
+  std::string link_address;
+  module_id id = no_module;
+  uint64_t instance = 0;
+  std::string link_kind;
+  /// Direct cost per size class.
+  std::vector<uint32_t> cost;
+  /// Milliseconds since the last hello.
+  uint32_t last_heard_ms = 0;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, neighbour_info& x) {
+  return f(caf::meta::type_name("neighbour_info"), x.channel, x.link_address,
+           x.id, x.instance, x.link_kind, x.cost, x.last_heard_ms);
+}
+
+/// One route row for people and scripts (the paper's five fields per class).
+struct route_info {
+  module_id destination = no_module;
+  uint8_t size_class = 0;
+  channel_id channel = 0;
+  std::string neighbour;
+  uint32_t cost = 0;
+  uint8_t hops = 0;
+  /// "CAN2.0-Ethernet": link kinds from here to the destination.
+  std::string forwarding;
+  bool selected = false;
+  bool feasible = false;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, route_info& x) {
+  return f(caf::meta::type_name("route_info"), x.destination, x.size_class,
+           x.channel, x.neighbour, x.cost, x.hops, x.forwarding, x.selected,
+           x.feasible);
+}
+
+/// The agent's identity and counters.
+struct routing_stats {
+  module_id self = no_module;
+  uint64_t instance = 0;
+  bool assigned = false;
+  uint32_t renumberings = 0;
+  uint64_t delivered = 0;
+  uint64_t forwarded = 0;
+  uint64_t originated = 0;
+  uint64_t dropped_no_route = 0;
+  uint64_t dropped_hop_limit = 0;
+  uint64_t dropped_no_receiver = 0;
+  uint64_t rx_malformed = 0;
+  uint64_t rx_unknown_neighbour = 0;
+  uint64_t rx_refused_routes = 0;
+  uint64_t tx_hellos = 0;
+  uint64_t tx_updates = 0;
+  uint64_t tx_update_entries = 0;
+  uint64_t tx_claims = 0;
+  uint64_t tx_conflicts = 0;
+  uint64_t tx_seqno_requests = 0;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
+  return f(caf::meta::type_name("routing_stats"), x.self, x.instance,
+           x.assigned, x.renumberings, x.delivered, x.forwarded, x.originated,
+           x.dropped_no_route, x.dropped_hop_limit, x.dropped_no_receiver,
+           x.rx_malformed, x.rx_unknown_neighbour, x.rx_refused_routes,
+           x.tx_hellos, x.tx_updates, x.tx_update_entries, x.tx_claims,
+           x.tx_conflicts, x.tx_seqno_requests);
+}
+
+/// Receives this module's data packets of one protocol (the application
+/// layer).
+using network_receiver_actor = caf::typed_actor<caf::reacts_to<packet_delivered>>;
+
+using routing_agent_actor = caf::typed_actor<
+  /// Sends a data packet; one-way: failures are counted.
+  caf::reacts_to<send_packet>,
+  /// Sends a data packet; the reply says whether a route existed
+  /// (ec::no_route naming the destination otherwise).
+  caf::replies_to<atom::send, send_packet>::with<void>,
+  /// Registers the receiver of one protocol.
+  caf::reacts_to<atom::subscribe, uint8_t, network_receiver_actor>,
+  caf::replies_to<atom::get, atom::routes>::with<std::vector<route_info>>,
+  caf::replies_to<atom::get, atom::neighbors>::with<std::vector<neighbour_info>>,
+  caf::replies_to<atom::get, atom::stats>::with<routing_stats>,
+  // -- from the IO manager and the channels -----------------------------------
+  caf::reacts_to<channel_up>, caf::reacts_to<channel_down>,
+  caf::reacts_to<packet_received>, caf::reacts_to<link_event>,
+  // -- timer ------------------------------------------------------------------
+  caf::reacts_to<atom::tick>>;
+
+/// Timers and identity of one agent.
+struct routing_config {
+  /// Static id, or no_module for dynamic addressing.
+  module_id id = no_module;
+  /// Hello interval; a neighbour is lost after `hello_loss` missed hellos.
+  std::chrono::milliseconds hello_interval{1000};
+  uint32_t hello_loss = 3;
+  /// Full (periodic) updates every this many hello intervals.
+  uint32_t update_every = 4;
+  /// Routes expire after this many update intervals without refresh.
+  double hold_factor = 3.5;
+  /// A dynamically addressed module re-floods its claim (an announcement)
+  /// every this many hello intervals, so that a holder of the
+  /// same id in a partition that merged detects the conflict.
+  uint32_t announce_every = 10;
+  /// Instance nonce and seed for the address allocator; 0: random.
+  uint64_t instance = 0;
+  uint64_t seed = 0;
+  /// Test hook: called for every data packet this module handles (delivered
+  /// or forwarded), with the module's id; used by packet-path checkers.
+  std::function<void(module_id self, const data_header&, const byte_buffer&)>
+    observer;
+};
+
+/// Spawns the agent and subscribes it to `io`'s channels.
+routing_agent_actor spawn_routing_agent(caf::actor_system& sys,
+                                        io_manager_actor io,
+                                        routing_config cfg);
+
+} // namespace herm

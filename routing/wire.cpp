@@ -1,0 +1,432 @@
+#include "routing/wire.hpp"
+
+#include <algorithm>
+#include <cassert>
+#include <cstdio>
+#include <string>
+
+#include "actors/runtime/error.hpp"
+
+namespace herm {
+
+namespace {
+
+// -- layout ----------------------------------------------------------------------
+
+// Sizes of the fixed parts (docs/protocol.md, "Network packets").
+constexpr size_t hello_size = 15;          // byte0, sender, instance, seqno, interval
+constexpr size_t seqno_request_size = 8;   // byte0, sender, origin, seqno, hop_count
+constexpr size_t claim_size = 20;          // byte0, id, nonce, instance, hop_limit
+constexpr size_t conflict_size = 28;       // byte0, id, holder, nonce, loser, hop_limit
+constexpr size_t update_head_size = 12;    // byte0, sender, instance, count
+constexpr size_t entry_head_size = 4;      // origin, seqno
+constexpr size_t class_metric_size = 4;    // metric
+constexpr size_t min_entry_size = entry_head_size + size_classes * class_metric_size;
+
+/// Offset of the hop limit in a data header, and the flags' reserved bits.
+constexpr size_t data_hop_limit_offset = 5;
+constexpr uint8_t data_reserved_flags = 0xF0;
+
+/// Largest link_code value on the wire.
+constexpr uint8_t max_link_code = static_cast<uint8_t>(link_code::rs232c);
+
+constexpr uint8_t first_byte(packet_type t) {
+  return static_cast<uint8_t>(wire_version << 4 | static_cast<uint8_t>(t));
+}
+
+const char* name_of(packet_type t) {
+  switch (t) {
+    case packet_type::data:
+      return "data";
+    case packet_type::hello:
+      return "hello";
+    case packet_type::update:
+      return "update";
+    case packet_type::seqno_request:
+      return "seqno_request";
+    case packet_type::claim:
+      return "claim";
+    case packet_type::conflict:
+      return "conflict";
+  }
+  return "?";
+}
+
+constexpr bool known_type(uint8_t t) {
+  return t <= static_cast<uint8_t>(packet_type::conflict);
+}
+
+std::string num(size_t x) {
+  return std::to_string(x);
+}
+
+std::string hex(uint8_t x) {
+  char buf[8];
+  std::snprintf(buf, sizeof(buf), "0x%02X", x);
+  return buf;
+}
+
+caf::error bad(packet_type t, const std::string& what) {
+  return make_error(ec::invalid_parameter, std::string{name_of(t)} + ": " + what);
+}
+
+/// Checks the first byte of a packet that must be of type `t`.
+caf::error check_head(packet_type t, const uint8_t* data, size_t size) {
+  if (size == 0 || data == nullptr)
+    return bad(t, "empty packet");
+  auto version = data[0] >> 4;
+  if (version != wire_version)
+    return bad(t, "version " + num(version) + ", expected "
+                    + num(wire_version));
+  auto type = static_cast<uint8_t>(data[0] & 0x0F);
+  if (type != static_cast<uint8_t>(t))
+    return bad(t, "packet of type " + num(type)
+                    + (known_type(type)
+                         ? std::string{" ("} + name_of(packet_type{type}) + ")"
+                         : std::string{" (unknown)"}));
+  return caf::none;
+}
+
+/// Checks that a fixed-size packet has exactly `expected` bytes.
+caf::error check_exact(packet_type t, size_t size, size_t expected) {
+  if (size < expected)
+    return bad(t, "truncated: " + num(size) + " of " + num(expected)
+                    + " bytes");
+  if (size > expected)
+    return bad(t, num(size - expected) + " trailing bytes");
+  return caf::none;
+}
+
+// -- little-endian reading and writing --------------------------------------------
+
+/// Appends little-endian integers.
+struct writer {
+  byte_buffer& out;
+
+  void u8(uint8_t x) {
+    out.push_back(x);
+  }
+
+  void u16(uint16_t x) {
+    out.push_back(static_cast<uint8_t>(x));
+    out.push_back(static_cast<uint8_t>(x >> 8));
+  }
+
+  void u32(uint32_t x) {
+    for (int i = 0; i < 4; ++i)
+      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
+  }
+
+  void u64(uint64_t x) {
+    for (int i = 0; i < 8; ++i)
+      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
+  }
+};
+
+/// Reads little-endian integers. Callers check `left()` before reading; the
+/// reads assert it.
+struct reader {
+  const uint8_t* data;
+  size_t size;
+  size_t pos = 0;
+
+  size_t left() const noexcept {
+    return size - pos;
+  }
+
+  uint8_t u8() {
+    assert(left() >= 1);
+    return data[pos++];
+  }
+
+  uint16_t u16() {
+    assert(left() >= 2);
+    auto x = static_cast<uint16_t>(data[pos] | data[pos + 1] << 8);
+    pos += 2;
+    return x;
+  }
+
+  uint32_t u32() {
+    assert(left() >= 4);
+    uint32_t x = 0;
+    for (int i = 0; i < 4; ++i)
+      x |= uint32_t{data[pos + i]} << (8 * i);
+    pos += 4;
+    return x;
+  }
+
+  uint64_t u64() {
+    assert(left() >= 8);
+    uint64_t x = 0;
+    for (int i = 0; i < 8; ++i)
+      x |= uint64_t{data[pos + i]} << (8 * i);
+    pos += 8;
+    return x;
+  }
+};
+
+/// Whether class `k` of `x` can be sent as it is. A class that cannot is
+/// sent as a retraction, which is always safe for loop freedom.
+bool class_encodable(const advertised& x, size_t k) {
+  if (x.metrics[k] == infinite_metric)
+    return false;
+  if (x.hops[k] > max_route_hops || x.path[k].size() != x.hops[k])
+    return false;
+  for (auto c : x.path[k])
+    if (static_cast<uint8_t>(c) > max_link_code)
+      return false;
+  return true;
+}
+
+} // namespace
+
+// -- type ------------------------------------------------------------------------
+
+caf::expected<packet_type> peek_type(const uint8_t* data, size_t size) {
+  if (size == 0 || data == nullptr)
+    return make_error(ec::invalid_parameter, "packet: empty");
+  auto version = data[0] >> 4;
+  if (version != wire_version)
+    return make_error(ec::invalid_parameter,
+                      "packet: version " + num(version) + ", expected "
+                        + num(wire_version));
+  auto type = static_cast<uint8_t>(data[0] & 0x0F);
+  if (!known_type(type))
+    return make_error(ec::invalid_parameter,
+                      "packet: unknown type " + num(type));
+  return packet_type{type};
+}
+
+// -- data ------------------------------------------------------------------------
+
+void encode(const data_header& h, byte_buffer& out) {
+  assert(h.size_class < size_classes && h.priority <= 3);
+  writer w{out};
+  w.u8(first_byte(packet_type::data));
+  w.u16(h.src);
+  w.u16(h.dst);
+  w.u8(h.hop_limit);
+  w.u8(static_cast<uint8_t>((h.size_class & 0x03) | (h.priority & 0x03) << 2));
+  w.u8(h.protocol);
+}
+
+caf::expected<data_header> decode_data_header(const uint8_t* data,
+                                              size_t size) {
+  constexpr auto t = packet_type::data;
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (size < data_header_size)
+    return bad(t, "truncated header: " + num(size) + " of "
+                    + num(data_header_size) + " bytes");
+  reader r{data, size, 1};
+  data_header h;
+  h.src = r.u16();
+  h.dst = r.u16();
+  h.hop_limit = r.u8();
+  auto flags = r.u8();
+  if ((flags & data_reserved_flags) != 0)
+    return bad(t, "reserved flag bits set (flags " + hex(flags) + ")");
+  h.size_class = static_cast<uint8_t>(flags & 0x03);
+  h.priority = static_cast<uint8_t>(flags >> 2 & 0x03);
+  h.protocol = r.u8();
+  return h;
+}
+
+void set_hop_limit(uint8_t* packet, uint8_t hop_limit) {
+  packet[data_hop_limit_offset] = hop_limit;
+}
+
+// -- hello -----------------------------------------------------------------------
+
+void encode(const hello& x, byte_buffer& out) {
+  writer w{out};
+  w.u8(first_byte(packet_type::hello));
+  w.u16(x.sender);
+  w.u64(x.instance);
+  w.u16(x.seqno);
+  w.u16(x.interval_ms);
+}
+
+caf::expected<hello> decode_hello(const uint8_t* data, size_t size) {
+  constexpr auto t = packet_type::hello;
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (auto err = check_exact(t, size, hello_size))
+    return err;
+  reader r{data, size, 1};
+  hello x;
+  x.sender = r.u16();
+  x.instance = r.u64();
+  x.seqno = r.u16();
+  x.interval_ms = r.u16();
+  return x;
+}
+
+// -- update ----------------------------------------------------------------------
+
+void encode(const update& x, byte_buffer& out) {
+  assert(x.entries.size() <= max_update_entries);
+  auto count = std::min(x.entries.size(), max_update_entries);
+  writer w{out};
+  w.u8(first_byte(packet_type::update));
+  w.u16(x.sender);
+  w.u64(x.instance);
+  w.u8(static_cast<uint8_t>(count));
+  for (size_t i = 0; i < count; ++i) {
+    auto& e = x.entries[i];
+    w.u16(e.origin);
+    w.u16(e.seqno);
+    for (size_t k = 0; k < size_classes; ++k) {
+      if (!class_encodable(e, k)) {
+        w.u32(infinite_metric);
+        continue;
+      }
+      w.u32(e.metrics[k]);
+      w.u8(e.hops[k]);
+      for (auto c : e.path[k])
+        w.u8(static_cast<uint8_t>(c));
+    }
+  }
+}
+
+caf::expected<update> decode_update(const uint8_t* data, size_t size) {
+  constexpr auto t = packet_type::update;
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (size < update_head_size)
+    return bad(t, "truncated header: " + num(size) + " of "
+                    + num(update_head_size) + " bytes");
+  reader r{data, size, 1};
+  update x;
+  x.sender = r.u16();
+  x.instance = r.u64();
+  size_t count = r.u8();
+  if (count > max_update_entries)
+    return bad(t, num(count) + " entries, at most "
+                    + num(max_update_entries));
+  if (r.left() < count * min_entry_size)
+    return bad(t, num(count) + " entries need at least "
+                    + num(count * min_entry_size) + " bytes, "
+                    + num(r.left()) + " left");
+  x.entries.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    auto where = [&] { return "entry " + num(i + 1) + " of " + num(count); };
+    auto& e = x.entries[i];
+    if (r.left() < entry_head_size)
+      return bad(t, where() + " truncated");
+    e.origin = r.u16();
+    e.seqno = r.u16();
+    for (size_t k = 0; k < size_classes; ++k) {
+      auto in_class = [&] { return where() + ", class " + num(k); };
+      if (r.left() < class_metric_size)
+        return bad(t, where() + " truncated");
+      e.metrics[k] = r.u32();
+      e.hops[k] = 0;
+      if (e.metrics[k] == infinite_metric)
+        continue;
+      if (r.left() < 1)
+        return bad(t, where() + " truncated");
+      auto hops = r.u8();
+      if (hops > max_route_hops)
+        return bad(t, in_class() + ": " + num(hops) + " hops, at most "
+                        + num(max_route_hops));
+      if (r.left() < hops)
+        return bad(t, where() + " truncated");
+      e.hops[k] = hops;
+      e.path[k].reserve(hops);
+      for (size_t h = 0; h < hops; ++h) {
+        auto c = r.u8();
+        if (c > max_link_code)
+          return bad(t, in_class() + ": unknown link code " + num(c)
+                          + " at hop " + num(h + 1));
+        e.path[k].push_back(static_cast<link_code>(c));
+      }
+    }
+  }
+  if (r.left() != 0)
+    return bad(t, num(r.left()) + " trailing bytes");
+  return x;
+}
+
+// -- seqno request ---------------------------------------------------------------
+
+void encode(const seqno_request& x, byte_buffer& out) {
+  writer w{out};
+  w.u8(first_byte(packet_type::seqno_request));
+  w.u16(x.sender);
+  w.u16(x.origin);
+  w.u16(x.seqno);
+  w.u8(x.hop_count);
+}
+
+caf::expected<seqno_request> decode_seqno_request(const uint8_t* data,
+                                                  size_t size) {
+  constexpr auto t = packet_type::seqno_request;
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (auto err = check_exact(t, size, seqno_request_size))
+    return err;
+  reader r{data, size, 1};
+  seqno_request x;
+  x.sender = r.u16();
+  x.origin = r.u16();
+  x.seqno = r.u16();
+  x.hop_count = r.u8();
+  return x;
+}
+
+// -- claim -----------------------------------------------------------------------
+
+void encode(const claim& x, byte_buffer& out) {
+  writer w{out};
+  w.u8(first_byte(packet_type::claim));
+  w.u16(x.id);
+  w.u64(x.nonce);
+  w.u64(x.instance);
+  w.u8(x.hop_limit);
+}
+
+caf::expected<claim> decode_claim(const uint8_t* data, size_t size) {
+  constexpr auto t = packet_type::claim;
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (auto err = check_exact(t, size, claim_size))
+    return err;
+  reader r{data, size, 1};
+  claim x;
+  x.id = r.u16();
+  x.nonce = r.u64();
+  x.instance = r.u64();
+  x.hop_limit = r.u8();
+  return x;
+}
+
+// -- conflict --------------------------------------------------------------------
+
+void encode(const conflict& x, byte_buffer& out) {
+  writer w{out};
+  w.u8(first_byte(packet_type::conflict));
+  w.u16(x.id);
+  w.u64(x.holder_instance);
+  w.u64(x.claim_nonce);
+  w.u64(x.loser_instance);
+  w.u8(x.hop_limit);
+}
+
+caf::expected<conflict> decode_conflict(const uint8_t* data, size_t size) {
+  constexpr auto t = packet_type::conflict;
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (auto err = check_exact(t, size, conflict_size))
+    return err;
+  reader r{data, size, 1};
+  conflict x;
+  x.id = r.u16();
+  x.holder_instance = r.u64();
+  x.claim_nonce = r.u64();
+  x.loser_instance = r.u64();
+  x.hop_limit = r.u8();
+  return x;
+}
+
+} // namespace herm

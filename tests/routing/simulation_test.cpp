@@ -1,0 +1,456 @@
+// Deterministic actor-level simulations of the Network Adaptation Layer:
+// modules (IO manager + routing agent) joined by in-process links with the
+// profiles of Table 1, under CAF's test_coordinator. Converged routes are
+// checked against shortest paths computed independently here (Dijkstra over
+// the class-0 link costs), and a packet-path checker asserts that no packet
+// ever visits a module twice.
+
+#include <queue>
+#include <random>
+
+#include "tests/support/null_frame_handler.hpp"
+#include "tests/support/actor_fixture.hpp"
+#include "actors/testing/sim_network.hpp"
+
+using namespace herm;
+using namespace herm::test;
+using namespace herm::testkit;
+using namespace std::chrono_literals;
+
+namespace {
+
+std::string test_prefix() {
+  auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  std::string name = std::string{info->test_suite_name()} + "-" + info->name();
+  std::replace(name.begin(), name.end(), '/', '-');
+  return name;
+}
+
+/// A topology: modules 0..n-1 with static ids 0x100 + i, and links.
+struct topology {
+  size_t n = 0;
+  std::vector<std::pair<std::vector<size_t>, std::string>> links;
+};
+
+const char* kinds[] = {"ethernet", "can2.0", "ieee1394a", "usb2.0", "rs232c",
+                       "usb1.1"};
+
+topology line(size_t n, bool mixed) {
+  topology t{n, {}};
+  for (size_t i = 0; i + 1 < n; ++i)
+    t.links.push_back({{i, i + 1}, mixed ? kinds[i % 6] : "ethernet"});
+  return t;
+}
+
+topology ring(size_t n, bool mixed) {
+  auto t = line(n, mixed);
+  t.links.push_back({{n - 1, 0}, mixed ? "can2.0" : "ethernet"});
+  return t;
+}
+
+topology star(size_t n, bool mixed) {
+  topology t{n, {}};
+  for (size_t i = 1; i < n; ++i)
+    t.links.push_back({{0, i}, mixed ? kinds[i % 6] : "ethernet"});
+  return t;
+}
+
+topology grid(size_t w, size_t h, bool mixed) {
+  topology t{w * h, {}};
+  for (size_t y = 0; y < h; ++y)
+    for (size_t x = 0; x < w; ++x) {
+      auto i = y * w + x;
+      if (x + 1 < w)
+        t.links.push_back({{i, i + 1}, mixed ? kinds[(x + y) % 6] : "ethernet"});
+      if (y + 1 < h)
+        t.links.push_back({{i, i + w}, mixed ? kinds[(x * y) % 6] : "ethernet"});
+    }
+  return t;
+}
+
+/// A connected random mesh: a random spanning tree plus extra links, some
+/// of them buses of three stations.
+topology mesh(size_t n, uint64_t seed) {
+  std::mt19937_64 rng{seed};
+  topology t{n, {}};
+  auto pick = [&](size_t bound) {
+    return std::uniform_int_distribution<size_t>{0, bound - 1}(rng);
+  };
+  for (size_t i = 1; i < n; ++i)
+    t.links.push_back({{pick(i), i}, kinds[pick(6)]});
+  for (size_t extra = 0; extra < n / 2; ++extra) {
+    auto a = pick(n), b = pick(n), c = pick(n);
+    if (a == b || b == c || a == c)
+      continue;
+    if (extra % 3 == 0)
+      t.links.push_back({{a, b, c}, "can2.0"});
+    else
+      t.links.push_back({{a, b}, kinds[pick(6)]});
+  }
+  return t;
+}
+
+module_id id_of(size_t i) {
+  return static_cast<module_id>(0x100 + i);
+}
+
+/// Class-0 shortest path costs from `src` (Dijkstra over link costs).
+std::vector<uint64_t> shortest(const topology& t, size_t src,
+                               const std::vector<bool>& link_up = {}) {
+  std::vector<std::vector<std::pair<size_t, uint64_t>>> adj(t.n);
+  for (size_t li = 0; li < t.links.size(); ++li) {
+    if (!link_up.empty() && !link_up[li])
+      continue;
+    auto& [members, kind] = t.links[li];
+    auto cost = link_metrics(*find_profile(kind))[0];
+    for (auto a : members)
+      for (auto b : members)
+        if (a != b)
+          adj[a].push_back({b, cost});
+  }
+  // Dijkstra on (cost, hops): among shortest paths, the fewest hops.
+  std::vector<std::pair<uint64_t, uint64_t>> dist(t.n, {UINT64_MAX, 0});
+  using item = std::pair<std::pair<uint64_t, uint64_t>, size_t>;
+  std::priority_queue<item, std::vector<item>, std::greater<>> q;
+  dist[src] = {0, 0};
+  q.push({dist[src], src});
+  while (!q.empty()) {
+    auto [d, u] = q.top();
+    q.pop();
+    if (d > dist[u])
+      continue;
+    for (auto [v, c] : adj[u]) {
+      std::pair<uint64_t, uint64_t> nd{d.first + c, d.second + 1};
+      if (nd < dist[v]) {
+        dist[v] = nd;
+        q.push({nd, v});
+      }
+    }
+  }
+  // Routes are capped at max_route_hops: farther modules are unreachable.
+  // (Exact for the topologies here: uniform costs, or diameters below the
+  // cap.)
+  std::vector<uint64_t> result(t.n);
+  for (size_t i = 0; i < t.n; ++i)
+    result[i] = dist[i].second > max_route_hops ? UINT64_MAX : dist[i].first;
+  return result;
+}
+
+class routing_sim : public actor_fixture {
+public:
+  sim_network build(const topology& t) {
+    sim_network net{*this, test_prefix()};
+    for (size_t i = 0; i < t.n; ++i)
+      net.add_module(id_of(i));
+    for (auto& [members, kind] : t.links)
+      net.connect(members, kind);
+    net.start();
+    return net;
+  }
+
+  /// Every module's selected class-0 route to every other module has the
+  /// shortest-path cost. Returns the number of mismatches (0 when right).
+  size_t check_costs(sim_network& net, const topology& t,
+                     const std::vector<bool>& link_up = {}) {
+    size_t wrong = 0;
+    for (size_t a = 0; a < t.n; ++a) {
+      auto dist = shortest(t, a, link_up);
+      std::map<module_id, uint32_t> selected;
+      for (auto& r : net.routes(a))
+        if (r.size_class == 0 && r.selected)
+          selected[r.destination] = r.cost;
+      for (size_t b = 0; b < t.n; ++b) {
+        if (a == b)
+          continue;
+        auto i = selected.find(id_of(b));
+        bool ok = dist[b] == UINT64_MAX
+                    ? i == selected.end()
+                    : i != selected.end() && i->second == dist[b];
+        if (!ok && ++wrong <= 5)
+          ADD_FAILURE() << "module " << to_hex(id_of(a)) << " -> "
+                        << to_hex(id_of(b)) << ": expected cost "
+                        << (dist[b] == UINT64_MAX ? std::string{"unreachable"}
+                                                  : std::to_string(dist[b]))
+                        << ", got "
+                        << (i == selected.end() ? std::string{"no route"}
+                                                : std::to_string(i->second));
+      }
+    }
+    return wrong;
+  }
+
+  /// Sends packets between `pairs` random pairs; all must arrive, no loops.
+  void check_traffic(sim_network& net, const topology& t_, size_t pairs,
+                     uint64_t seed) {
+    std::mt19937_64 rng{seed};
+    std::uniform_int_distribution<size_t> pick{0, net.size() - 1};
+    size_t sent = 0;
+    std::vector<size_t> before(net.size());
+    for (size_t i = 0; i < net.size(); ++i)
+      before[i] = net.at(i).received->size();
+    std::map<size_t, size_t> expected;
+    for (size_t k = 0; k < pairs; ++k) {
+      auto a = pick(rng), b = pick(rng);
+      if (a == b || shortest(t_, a)[b] == UINT64_MAX)
+        continue;
+      auto got = net.at(b).received->size();
+      auto size = 8 + (k % 3) * 500;
+      auto tag = net.send(a, id_of(b), size);
+      ++expected[b];
+      ++sent;
+      if (net.at(b).received->size() == got) {
+        std::string path;
+        for (auto m : net.path(tag))
+          path += to_hex(m) + " ";
+        auto st = net.stats(a);
+        ADD_FAILURE() << "packet of " << size << " bytes from " << to_hex(id_of(a))
+                      << " to " << to_hex(id_of(b)) << " lost; path " << path
+                      << "; source no_route " << st.dropped_no_route;
+      }
+    }
+    for (auto [b, count] : expected)
+      EXPECT_EQ(net.at(b).received->size() - before[b], count)
+        << "module " << to_hex(id_of(b));
+    EXPECT_EQ(net.loops(), 0u);
+  }
+};
+
+} // namespace
+
+TEST_F(routing_sim, two_modules_learn_routes_to_each_other) {
+  topology t{2, {{{0, 1}, "ethernet"}}};
+  auto net = build(t);
+  net.advance(500ms);
+  auto r = net.route(0, id_of(1));
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->cost, 10u);
+  EXPECT_EQ(r->hops, 1u);
+  EXPECT_EQ(r->forwarding, "Ethernet");
+  check_traffic(net, t, 10, 1);
+}
+
+TEST_F(routing_sim, the_paper_testbed_routes_by_cost_and_size) {
+  // Sensor 0x40, main controller 0x4E, vision 0x30, mobile 0x50 (Fig. 5):
+  // RS232C sensor-main, IEEE 1394 vision-mobile, Ethernet mobile-main and a
+  // CAN bus joining main, mobile and sensor.
+  sim_network net{*this, test_prefix()};
+  auto sensor = net.add_module(0x40);
+  auto main = net.add_module(0x4E);
+  auto vision = net.add_module(0x30);
+  auto mobile = net.add_module(0x50);
+  net.connect({sensor, main}, "rs232c");
+  net.connect({vision, mobile}, "ieee1394a");
+  auto eth = net.connect({mobile, main}, "ethernet");
+  net.connect({main, mobile, sensor}, "can2.0");
+  net.start();
+  net.advance(1s);
+  // Vision reaches the main controller through mobile: 1394 (4) + Ethernet (10).
+  auto r = net.route(vision, 0x4E);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->cost, 14u);
+  EXPECT_EQ(r->hops, 2u);
+  EXPECT_EQ(r->forwarding, "IEEE1394a-Ethernet");
+  auto tag = net.send(vision, 0x4E, 100);
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{0x30, 0x50, 0x4E}));
+  // Small sensor messages take the CAN bus (30 < 47); a 1,000-byte batch
+  // takes RS232C (47 x 32 frames = 1,504 < 30 x 128 frames = 3,840).
+  auto small = net.route(sensor, 0x4E, 0);
+  ASSERT_TRUE(small);
+  EXPECT_EQ(small->forwarding, "CAN2.0");
+  auto large = net.route(sensor, 0x4E, size_class_of(1000));
+  ASSERT_TRUE(large);
+  EXPECT_EQ(large->forwarding, "RS232C");
+  EXPECT_EQ(large->cost, 1504u);
+  // Ethernet goes down: vision's traffic moves to the CAN path via mobile.
+  net.cut(eth);
+  net.advance(300ms);
+  r = net.route(vision, 0x4E);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->forwarding, "IEEE1394a-CAN2.0");
+  EXPECT_EQ(r->cost, 34u);
+  tag = net.send(vision, 0x4E, 100);
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{0x30, 0x50, 0x4E}));
+  EXPECT_EQ(net.at(main).received->size(), 2u);
+  EXPECT_EQ(net.loops(), 0u);
+}
+
+TEST_F(routing_sim, an_unknown_destination_is_a_typed_error) {
+  topology t{2, {{{0, 1}, "ethernet"}}};
+  auto net = build(t);
+  net.advance(500ms);
+  auto res = call<>(net.at(0).agent, atom::send_v,
+                    send_packet{0x999, 0, prio_normal, byte_buffer(4)});
+  ASSERT_FALSE(res);
+  EXPECT_TRUE(is(res.error(), ec::no_route));
+  EXPECT_NE(render(res.error()).find("0x999"), std::string::npos);
+  auto ok = call<>(net.at(0).agent, atom::send_v,
+                   send_packet{id_of(1), 0, prio_normal, byte_buffer(4)});
+  EXPECT_TRUE(ok);
+}
+
+struct topo_case {
+  const char* name;
+  topology (*make)();
+  std::chrono::milliseconds settle;
+};
+
+class routing_topologies : public routing_sim,
+                           public ::testing::WithParamInterface<topo_case> {};
+
+TEST_P(routing_topologies, converge_to_shortest_paths_without_loops) {
+  auto t = GetParam().make();
+  auto net = build(t);
+  net.advance(GetParam().settle);
+  EXPECT_EQ(check_costs(net, t), 0u);
+  check_traffic(net, t, std::min<size_t>(t.n * 2, 200), 7);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+  routing_sim, routing_topologies,
+  ::testing::Values(
+    topo_case{"line10", [] { return line(10, true); }, 2s},
+    topo_case{"ring10", [] { return ring(10, true); }, 2s},
+    topo_case{"star10", [] { return star(10, true); }, 2s},
+    topo_case{"grid10", [] { return grid(5, 2, true); }, 2s},
+    topo_case{"mesh10", [] { return mesh(10, 1); }, 2s},
+    topo_case{"line100", [] { return line(100, false); }, 5s},
+    topo_case{"ring100", [] { return ring(100, false); }, 5s},
+    topo_case{"star100", [] { return star(100, true); }, 3s},
+    topo_case{"grid100", [] { return grid(10, 10, true); }, 5s},
+    topo_case{"mesh100", [] { return mesh(100, 2); }, 5s}),
+  [](const auto& info) { return std::string{info.param.name}; });
+
+TEST_F(routing_sim, traffic_moves_to_the_alternate_path_and_back) {
+  auto t = ring(6, false);
+  auto net = build(t);
+  net.advance(1s);
+  // 0 -> 2 goes 0-1-2 (2 hops) rather than 0-5-4-3-2.
+  auto tag = net.send(0, id_of(2));
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(0), id_of(1), id_of(2)}));
+  net.cut(0); // link 0-1
+  net.advance(200ms); // two hello intervals
+  tag = net.send(0, id_of(2));
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(0), id_of(5), id_of(4),
+                                                   id_of(3), id_of(2)}));
+  std::vector<bool> up(t.links.size(), true);
+  up[0] = false;
+  EXPECT_EQ(check_costs(net, t, up), 0u);
+  net.restore(0);
+  net.advance(2s); // channel retry backoff, hellos, updates
+  tag = net.send(0, id_of(2));
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(0), id_of(1), id_of(2)}));
+  EXPECT_EQ(check_costs(net, t), 0u);
+  EXPECT_EQ(net.loops(), 0u);
+}
+
+TEST_F(routing_sim, a_dead_module_disappears_from_every_table_and_returns) {
+  auto t = grid(3, 3, false);
+  auto net = build(t);
+  net.advance(1s);
+  ASSERT_EQ(check_costs(net, t), 0u);
+  net.kill(4); // the centre
+  net.advance(2s); // lost hellos, retractions, expiry
+  for (size_t i = 0; i < t.n; ++i)
+    if (i != 4)
+      EXPECT_FALSE(net.route(i, id_of(4))) << "module " << i;
+  // Traffic between corners still flows, around the centre.
+  auto tag = net.send(0, id_of(8));
+  EXPECT_EQ(net.path(tag).size(), 5u);
+  net.start_module(4);
+  net.advance(2s);
+  EXPECT_EQ(check_costs(net, t), 0u);
+  EXPECT_EQ(net.loops(), 0u);
+}
+
+TEST_F(routing_sim, dynamic_addresses_are_unique_across_several_hops) {
+  sim_network net{*this, test_prefix()};
+  for (size_t i = 0; i < 12; ++i)
+    net.add_module(no_module, 1000 + i);
+  for (size_t i = 0; i + 1 < 12; ++i)
+    net.connect({i, i + 1}, i % 2 == 0 ? "ethernet" : "can2.0");
+  net.start();
+  net.advance(3s);
+  std::set<module_id> ids;
+  for (size_t i = 0; i < 12; ++i) {
+    auto st = net.stats(i);
+    EXPECT_TRUE(st.assigned) << i;
+    EXPECT_GE(st.self, first_dynamic_module);
+    ids.insert(st.self);
+  }
+  EXPECT_EQ(ids.size(), 12u);
+  // And they route to each other.
+  auto far = net.stats(11).self;
+  net.send(0, far, 8);
+  EXPECT_EQ(net.at(11).received->size(), 1u);
+}
+
+TEST_F(routing_sim, two_modules_claiming_the_same_id_at_once_end_with_different_ids) {
+  sim_network net{*this, test_prefix()};
+  // The same seed makes both pick the same first id.
+  auto a = net.add_module(no_module, 4242);
+  auto b = net.add_module(no_module, 4242);
+  auto c = net.add_module(0x4E);
+  net.connect({a, c}, "ethernet");
+  net.connect({c, b}, "can2.0");
+  net.start();
+  net.advance(3s);
+  auto sa = net.stats(a), sb = net.stats(b);
+  EXPECT_TRUE(sa.assigned);
+  EXPECT_TRUE(sb.assigned);
+  // Same seed, same first pick: one of them lost the claim and picked
+  // again before it was assigned (not a renumbering: it never held the id).
+  EXPECT_NE(sa.self, sb.self);
+  EXPECT_GT(sa.tx_claims + sb.tx_claims, 6u);
+}
+
+TEST_F(routing_sim, merging_partitions_that_hold_the_same_id_renumber_one_side) {
+  sim_network net{*this, test_prefix()};
+  auto a = net.add_module(no_module, 99);
+  auto a2 = net.add_module(0x4E);
+  auto b = net.add_module(no_module, 99);
+  auto b2 = net.add_module(0x50);
+  net.connect({a, a2}, "ethernet");
+  net.connect({b, b2}, "ethernet");
+  auto bridge = net.connect({a2, b2}, "ethernet");
+  net.cut(bridge);
+  net.start();
+  net.advance(3s);
+  auto before_a = net.stats(a).self, before_b = net.stats(b).self;
+  ASSERT_EQ(before_a, before_b); // two partitions, one id
+  net.restore(bridge);
+  // The bridge's channels retry with backoff (up to 5 s), then the next
+  // announcement (every 10 hello intervals) meets the other holder.
+  net.advance(10s);
+  auto sa = net.stats(a), sb = net.stats(b);
+  EXPECT_NE(sa.self, sb.self);
+  EXPECT_EQ(sa.renumberings + sb.renumberings, 1u);
+  // The renumbered side's old id is gone from the far side's table, and
+  // both are reachable under their new ids.
+  net.send(a2, sb.self, 8);
+  net.send(b2, sa.self, 8);
+  EXPECT_EQ(net.at(b).received->size(), 1u);
+  EXPECT_EQ(net.at(a).received->size(), 1u);
+}
+
+TEST_F(routing_sim, malformed_routing_packets_are_counted_and_ignored) {
+  topology t{2, {{{0, 1}, "ethernet"}}};
+  auto net = build(t);
+  net.advance(500ms);
+  // A raw station on module 1's segment speaks garbage.
+  device_config dev{"raw", "inproc", test_prefix() + "-l0", {{"station", "9"}}};
+  auto drv = find_link_kind("inproc")->open(dev);
+  ASSERT_TRUE(drv);
+  (*drv)->start(std::make_shared<null_frame_handler>());
+  // Single-frame packets (fragment header 0x00): bad version, truncated
+  // update, truncated hello.
+  const uint8_t bad_version[] = {0x00, 0x72, 1, 2};
+  const uint8_t short_update[] = {0x00, 0x12, 0x01};
+  const uint8_t short_hello[] = {0x00, 0x11, 0x01, 0x00};
+  for (auto* p : {bad_version, short_update, short_hello})
+    (*drv)->send(broadcast_addr, p, p == bad_version ? 4 : p == short_update ? 3 : 4, 0);
+  run();
+  EXPECT_GE(net.stats(0).rx_malformed + net.stats(1).rx_malformed, 6u);
+  (*drv)->stop();
+  // Routing still works.
+  check_traffic(net, t, 4, 3);
+}
