@@ -50,7 +50,9 @@ struct agent_state {
   std::map<module_id, time_point> requested;
   routing_stats stats;
   uint16_t hello_seqno = 0;
+  /// Hello intervals and quarter intervals since start.
   uint32_t ticks = 0;
+  uint32_t quarters = 0;
   byte_buffer buf;
 
   std::chrono::steady_clock::duration hold() const {
@@ -395,15 +397,21 @@ void on_conflict(agent_impl self, channel_id ch, const byte_buffer& bytes) {
 
 // -- timer ----------------------------------------------------------------------
 
+/// Runs every quarter hello interval: liveness, expiry and addressing; every
+/// fourth time also hellos, periodic updates and announcements.
 void tick(agent_impl self) {
   auto& st = self->state;
   auto now = self->clock().now();
-  send_hellos(self);
+  bool hello_due = st.quarters++ % 4 == 0;
+  if (hello_due)
+    send_hellos(self);
   // Neighbours silent for too long are gone.
   table_change change;
   for (auto i = st.neighbours.begin(); i != st.neighbours.end();) {
     auto interval = std::max(i->second.interval, st.cfg.hello_interval);
-    if (now - i->second.last_hello > interval * st.cfg.hello_loss) {
+    auto limit = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      interval * st.cfg.hello_loss);
+    if (now - i->second.last_hello > limit) {
       auto c = st.table.remove_neighbour(i->first);
       change.changed.insert(change.changed.end(), c.changed.begin(),
                             c.changed.end());
@@ -423,6 +431,9 @@ void tick(agent_impl self) {
   apply_change(self, change);
   if (auto due = st.alloc->next_deadline(); due && *due <= now)
     act(self, st.alloc->tick(now));
+  self->delayed_send(self, st.cfg.hello_interval / 4, atom::tick_v);
+  if (!hello_due)
+    return;
   if (++st.ticks % st.cfg.update_every == 0)
     send_update(self, st.table.destinations());
   if (st.cfg.id == no_module && st.alloc->assigned()
@@ -437,7 +448,6 @@ void tick(agent_impl self) {
     send_all(self, st.buf);
     ++st.stats.tx_claims;
   }
-  self->delayed_send(self, st.cfg.hello_interval, atom::tick_v);
 }
 
 caf::error originate(agent_impl self, send_packet& msg) {
@@ -496,6 +506,9 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
   init.alloc = std::make_unique<address_allocator>(acfg, instance, seed);
   init.stats.instance = instance;
   self->send(io, atom::subscribe_v, caf::actor_cast<io_listener_actor>(self));
+  // Channels tell their subscribers when they end; the IO manager's
+  // channel_down carries the same news, and that is what we act on.
+  self->set_down_handler([](caf::down_msg&) {});
   act(self, init.alloc->start(self->clock().now()));
   self->send(self, atom::tick_v);
   return {

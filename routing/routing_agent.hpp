@@ -150,9 +150,14 @@ using routing_agent_actor = caf::typed_actor<
 struct routing_config {
   /// Static id, or no_module for dynamic addressing.
   module_id id = no_module;
-  /// Hello interval; a neighbour is lost after `hello_loss` missed hellos.
+  /// Hello interval. A neighbour is lost when no hello arrived for
+  /// `hello_loss` intervals (checked every quarter interval), or at once when
+  /// its channel ends. The default 1.5 (the first missed hello plus half an
+  /// interval of margin for jitter) moves traffic off a silently failed link
+  /// within 1.75 intervals; raise it on lossy links, where one lost hello
+  /// would otherwise drop a neighbour.
   std::chrono::milliseconds hello_interval{1000};
-  uint32_t hello_loss = 3;
+  double hello_loss = 1.5;
   /// Full (periodic) updates every this many hello intervals.
   uint32_t update_every = 4;
   /// Routes expire after this many update intervals without refresh.

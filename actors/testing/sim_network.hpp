@@ -137,7 +137,15 @@ public:
     fx_.run();
   }
 
+  /// Fails a link silently: frames vanish, no driver notices; only missed
+  /// hellos reveal it. `restore` ends it.
+  void silence(size_t li) {
+    links_[li].up = false;
+    inproc::blackhole(links_[li].segment, true);
+  }
+
   void restore(size_t li) {
+    inproc::blackhole(links_[li].segment, false);
     links_[li].up = true;
     inproc::replug(links_[li].segment);
   }

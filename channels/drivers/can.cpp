@@ -1,6 +1,6 @@
 // Link kind "can": HERM frames as CAN 2.0B (or CAN FD) data frames, the
 // identifier carrying priority, destination and source node
-// (channels/drivers/can_id.hpp, docs/protocol-can.md). Two backends share
+// (channels/drivers/can_id.hpp, docs/protocol.md). Two backends share
 // the frame format, option set and receive path:
 //
 //  * SocketCAN (interface "can0", "vcan0", ...): a PF_CAN/SOCK_RAW/CAN_RAW
@@ -26,7 +26,7 @@
 //    frames until then, so all hear the bus in one order, and filter by
 //    destination like a controller. Frame times are real CAN frame lengths
 //    at the configured bit rate (can::frame_bits). See transmit_loop and
-//    docs/protocol-can.md.
+//    docs/protocol.md.
 //
 // Threads: SocketCAN has one receive thread (poll on the socket and an
 // eventfd). The emulated bus adds a transmit thread (arbitration, pacing,

@@ -3,7 +3,7 @@
 // Identifier layout of HERM frames on CAN (link kind "can",
 // channels/drivers/can.cpp). Pure code: no clock, no I/O, so the driver,
 // its tests and fuzzers share one definition. Specified in
-// docs/protocol-can.md, section "CAN identifier layout".
+// docs/protocol.md, section "CAN identifier layout".
 //
 // 29-bit (CAN 2.0B extended) identifier, the default:
 //

@@ -23,6 +23,7 @@ namespace {
 struct segment {
   std::map<link_addr, std::weak_ptr<frame_handler>> stations;
   bool unplugged = false;
+  bool blackholed = false;
 };
 
 struct registry {
@@ -88,6 +89,8 @@ public:
       if (i == reg.segments.end() || i->second.unplugged)
         return make_error(ec::device_failed,
                           "inproc segment '" + segment_ + "' is unplugged");
+      if (i->second.blackholed)
+        return caf::none;
       if (dst == broadcast_addr) {
         for (auto& kv : i->second.stations)
           if (kv.first != station_)
@@ -210,6 +213,14 @@ void replug(const std::string& name) {
     if (i->second.stations.empty())
       reg.segments.erase(i);
   }
+}
+
+void blackhole(const std::string& name, bool on) {
+  auto& reg = registry::get();
+  std::lock_guard<std::mutex> guard{reg.mtx};
+  auto i = reg.segments.find(name);
+  if (i != reg.segments.end())
+    i->second.blackholed = on;
 }
 
 size_t stations(const std::string& name) {

@@ -17,6 +17,10 @@ void unplug(const std::string& segment, caf::error reason);
 /// Allows stations on `segment` again after `unplug`.
 void replug(const std::string& segment);
 
+/// Makes `segment` drop every frame silently (`on`) or carry them again:
+/// a failure that no driver notices, only missed hellos reveal.
+void blackhole(const std::string& segment, bool on);
+
 /// Number of stations attached to `segment` now.
 size_t stations(const std::string& segment);
 

@@ -1,7 +1,7 @@
 // The "serial" link kind: a point-to-point byte line (RS232C to a
 // microcontroller, a USB serial adapter, a USB CDC-ACM device, or a pty in
 // tests). Frames are COBS-encoded with a CRC-16 and delimited by 0x00 (see
-// serial_framing.hpp and docs/protocol-serial.md); options are resolved in
+// serial_framing.hpp and docs/protocol.md (serial framing)); options are resolved in
 // serial_settings.hpp.
 //
 // Addresses: the line has two ends. Frames from the other end carry src 1

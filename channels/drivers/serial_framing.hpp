@@ -4,7 +4,7 @@
 // how frames of at most MTU bytes travel over a line that carries bytes only
 // (RS232C, USB CDC-ACM). Pure code without clock or I/O, so the driver, its
 // tests and fuzzers share one definition. Specified for people (and
-// microcontrollers) in docs/protocol-serial.md.
+// microcontrollers) in docs/protocol.md (serial framing).
 //
 // On the wire, one frame of n bytes (1 <= n <= MTU <= 255) is
 //

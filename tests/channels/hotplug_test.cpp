@@ -14,6 +14,7 @@
 #include "actors/runtime/system.hpp"
 #include "actors/runtime/type_ids.hpp"
 #include "channels/io_manager.hpp"
+#include "tests/support/null_modem.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
@@ -123,4 +124,50 @@ TEST_F(hotplug, a_removed_link_file_ends_the_channel_and_it_comes_back) {
   ASSERT_EQ(rows.size(), 1u);
   EXPECT_EQ(rows[0].state, "up");
   EXPECT_EQ(rows[0].restarts, 2u);
+}
+
+TEST_F(hotplug, a_serial_line_that_disappears_comes_back_when_it_reappears) {
+  // The module's device path is a symlink (as udev gives a USB adapter a
+  // stable name); the test points it at one end of a null-modem cable.
+  std::string error;
+  auto cable = herm::test::null_modem::open({}, error);
+  ASSERT_TRUE(cable) << error;
+  auto link = dir + "/ttyHERM";
+  fs::create_symlink(cable->path_a(), link);
+  device_config dev{"ser0", "serial", link, {{"baud", "115200"}}};
+  caf::error err;
+  self->request(io, 5s, atom::add_v, dev)
+    .receive([](device_info&) {}, [&](caf::error& e) { err = e; });
+  ASSERT_FALSE(err) << render(err);
+  channel_id id = 0;
+  self->request(io, 5s, atom::open_v, channel_request{"ser0", "*", true})
+    .receive([&](channel_actor&, channel_info& info) { id = info.id; },
+             [&](caf::error& e) { err = e; });
+  ASSERT_FALSE(err) << render(err);
+  ASSERT_TRUE(next<channel_up>());
+
+  // Unplug: the line hangs up; the channel ends naming the device.
+  cable->unplug();
+  auto down = next<channel_down>();
+  ASSERT_TRUE(down);
+  EXPECT_EQ(down->id, id);
+  EXPECT_TRUE(down->will_retry);
+  EXPECT_NE(render(down->reason).find("ser0"), std::string::npos)
+    << render(down->reason);
+  // While the path points at nothing, retries fail.
+  fs::remove(link);
+  std::this_thread::sleep_for(300ms);
+  auto rows = table();
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].state, "retrying");
+  EXPECT_NE(rows[0].last_error.find("ttyHERM"), std::string::npos)
+    << rows[0].last_error;
+
+  // A new adapter appears under the same name: the channel comes back.
+  auto cable2 = herm::test::null_modem::open({}, error);
+  ASSERT_TRUE(cable2) << error;
+  fs::create_symlink(cable2->path_a(), link);
+  auto up = next<channel_up>();
+  ASSERT_TRUE(up);
+  EXPECT_EQ(up->info.id, id);
 }

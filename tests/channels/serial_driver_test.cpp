@@ -143,7 +143,7 @@ uint16_t reference_crc(const uint8_t* data, size_t size) {
   return crc;
 }
 
-/// The framing rules of docs/protocol-serial.md applied to a whole stream,
+/// The framing rules of docs/protocol.md (serial framing) applied to a whole stream,
 /// run by run, written independently of serial::decoder.
 events reference_decode(const byte_buffer& stream, uint32_t mtu,
                         bool escaped) {
@@ -562,7 +562,7 @@ TEST(serial_framing, cobs_decode_rejects_code_bytes_that_point_past_the_end) {
 // -- serial_framing: frames ----------------------------------------------------------
 
 TEST(serial_framing, encodes_the_documented_example_byte_by_byte) {
-  // docs/protocol-serial.md, "Worked example": a single-fragment HERM frame
+  // docs/protocol.md (serial framing), "Worked example": a single-fragment HERM frame
   // (header 0x00) carrying "Hi", sent on an idle line.
   auto frame = bytes({0x00, 0x48, 0x69});
   EXPECT_EQ(encode_wire(frame, true), "0001054869b57600");
