@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <map>
+#include <set>
 #include <random>
 
 #include "caf/actor_system.hpp"
@@ -46,6 +47,10 @@ struct agent_state {
   /// Floods seen recently (claims, conflicts, seqno requests), by key, with
   /// the time they were last relayed; bounded.
   std::map<std::tuple<uint8_t, uint64_t, uint64_t>, time_point> floods;
+  /// Triggered updates not sent yet (see apply_change).
+  std::set<module_id> pending_changed;
+  std::set<module_id> pending_starving;
+  bool flush_scheduled = false;
   /// When a seqno request for a destination was last sent.
   std::map<module_id, time_point> requested;
   routing_stats stats;
@@ -145,11 +150,33 @@ void send_seqno_requests(agent_impl self, const std::vector<module_id>& dests) {
   }
 }
 
+/// Collects what changed; a flush message queued behind the messages being
+/// processed sends one triggered update for the whole burst (a cold start
+/// or a failure changes many destinations through many updates at once).
 void apply_change(agent_impl self, const table_change& change) {
-  if (!change.changed.empty())
-    send_update(self, change.changed);
-  if (!change.starving.empty())
-    send_seqno_requests(self, change.starving);
+  auto& st = self->state;
+  st.pending_changed.insert(change.changed.begin(), change.changed.end());
+  st.pending_starving.insert(change.starving.begin(), change.starving.end());
+  if (!st.flush_scheduled
+      && (!st.pending_changed.empty() || !st.pending_starving.empty())) {
+    st.flush_scheduled = true;
+    self->send(self, atom::flush_v);
+  }
+}
+
+void flush_changes(agent_impl self) {
+  auto& st = self->state;
+  st.flush_scheduled = false;
+  std::vector<module_id> changed(st.pending_changed.begin(),
+                                 st.pending_changed.end());
+  std::vector<module_id> starving(st.pending_starving.begin(),
+                                  st.pending_starving.end());
+  st.pending_changed.clear();
+  st.pending_starving.clear();
+  if (!changed.empty())
+    send_update(self, changed);
+  if (!starving.empty())
+    send_seqno_requests(self, starving);
 }
 
 // -- addressing -----------------------------------------------------------------
@@ -314,13 +341,6 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
     if (!st.table.update(nh, e, now, st.hold(), change))
       ++st.stats.rx_refused_routes;
   }
-  std::sort(change.changed.begin(), change.changed.end());
-  change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
-                       change.changed.end());
-  std::sort(change.starving.begin(), change.starving.end());
-  change.starving.erase(
-    std::unique(change.starving.begin(), change.starving.end()),
-    change.starving.end());
   apply_change(self, change);
 }
 
@@ -568,7 +588,9 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       return result;
     },
     [self](atom::get, atom::stats) -> routing_stats {
-      return self->state.stats;
+      auto result = self->state.stats;
+      result.reachable = static_cast<uint32_t>(self->state.table.reachable());
+      return result;
     },
     [self](channel_up& up) {
       auto& st = self->state;
@@ -622,6 +644,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       // Hellos, not link events, decide who is a neighbour.
     },
     [self](atom::tick) { tick(self); },
+    [self](atom::flush) { flush_changes(self); },
   };
 }
 

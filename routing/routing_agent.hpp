@@ -98,6 +98,8 @@ struct routing_stats {
   uint64_t instance = 0;
   bool assigned = false;
   uint32_t renumberings = 0;
+  /// Destinations with a selected route (size class 0).
+  uint32_t reachable = 0;
   uint64_t delivered = 0;
   uint64_t forwarded = 0;
   uint64_t originated = 0;
@@ -118,7 +120,7 @@ struct routing_stats {
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
   return f(caf::meta::type_name("routing_stats"), x.self, x.instance,
-           x.assigned, x.renumberings, x.delivered, x.forwarded, x.originated,
+           x.assigned, x.renumberings, x.reachable, x.delivered, x.forwarded, x.originated,
            x.dropped_no_route, x.dropped_hop_limit, x.dropped_no_receiver,
            x.rx_malformed, x.rx_unknown_neighbour, x.rx_refused_routes,
            x.tx_hellos, x.tx_updates, x.tx_update_entries, x.tx_claims,
@@ -143,8 +145,10 @@ using routing_agent_actor = caf::typed_actor<
   // -- from the IO manager and the channels -----------------------------------
   caf::reacts_to<channel_up>, caf::reacts_to<channel_down>,
   caf::reacts_to<packet_received>, caf::reacts_to<link_event>,
-  // -- timer ------------------------------------------------------------------
-  caf::reacts_to<atom::tick>>;
+  // -- timers -----------------------------------------------------------------
+  caf::reacts_to<atom::tick>,
+  /// Sends the triggered updates collected while processing a burst.
+  caf::reacts_to<atom::flush>>;
 
 /// Timers and identity of one agent.
 struct routing_config {

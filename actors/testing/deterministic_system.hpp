@@ -74,9 +74,19 @@ public:
     return sched.run();
   }
 
-  /// Moves the clock forward, fires due timers, and runs until idle.
+  /// Moves the clock forward by `dt`, stopping at every timer due on the
+  /// way: the clock is set to the timer's exact time, the timer fires and
+  /// every actor runs until idle, so timers set by those actors fire on
+  /// time too. Then the clock is set to the end and actors run again.
   void advance(caf::timespan dt) {
-    sched.clock().advance_time(dt);
+    auto& clk = sched.clock();
+    auto target = clk.current_time + dt;
+    sched.run();
+    while (!clk.schedule().empty() && clk.schedule().begin()->first <= target) {
+      clk.trigger_timeout();
+      sched.run();
+    }
+    clk.current_time = target;
     sched.run();
   }
 

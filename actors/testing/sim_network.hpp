@@ -150,11 +150,9 @@ public:
     inproc::replug(links_[li].segment);
   }
 
-  /// Advances simulated time in steps of a tenth of the hello interval.
+  /// Advances simulated time; every timer fires at its exact time.
   void advance(std::chrono::milliseconds dt) {
-    auto step = hello_ / 10;
-    for (auto t = std::chrono::milliseconds(0); t < dt; t += step)
-      fx_.advance(step);
+    fx_.advance(dt);
   }
 
   /// Sends a packet from module a to module b's id; returns the packet's

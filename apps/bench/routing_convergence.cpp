@@ -50,14 +50,9 @@ counts totals(sim_network& net) {
 }
 
 bool converged(sim_network& net) {
-  for (size_t i = 0; i < net.size(); ++i) {
-    size_t selected = 0;
-    for (auto& r : net.routes(i))
-      if (r.size_class == 0 && r.selected)
-        ++selected;
-    if (selected + 1 < net.size())
+  for (size_t i = 0; i < net.size(); ++i)
+    if (net.stats(i).reachable + 1 < net.size())
       return false;
-  }
   return true;
 }
 

@@ -73,12 +73,29 @@
 #include "actors/runtime/error.hpp"
 #include "channels/drivers/can_emu_wire.hpp"
 #include "channels/drivers/can_id.hpp"
+#include "channels/drivers/medium_dir.hpp"
+#include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
 
 namespace herm {
 
 namespace {
+
+using posix::errno_text;
+using posix::now_ns;
+using posix::unique_fd;
+using namespace medium_dir;
+
+/// Stations of this kind with a socket file in `dir`.
+std::vector<uint64_t> list_stations_in(const std::string& dir) {
+  return list_stations(dir, 1, 254);
+}
+
+/// Parses "N.sock" for this kind's station range.
+uint64_t parse_station(const char* name) {
+  return parse_station_file(name, 1, 254);
+}
 
 // -- constants -------------------------------------------------------------------
 
@@ -116,19 +133,9 @@ constexpr uint32_t error_frame_bits = 23;
 
 // -- small helpers ---------------------------------------------------------------
 
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
-
 std::chrono::steady_clock::time_point to_time_point(int64_t ns) {
   // libstdc++'s steady_clock is CLOCK_MONOTONIC.
   return std::chrono::steady_clock::time_point{std::chrono::nanoseconds{ns}};
-}
-
-std::string errno_text(int err) {
-  return std::error_code(err, std::generic_category()).message();
 }
 
 std::string hex(uint32_t x) {
@@ -136,33 +143,6 @@ std::string hex(uint32_t x) {
   std::snprintf(buf, sizeof(buf), "0x%X", x);
   return buf;
 }
-
-/// Owns one file descriptor.
-class unique_fd {
-public:
-  unique_fd() = default;
-  explicit unique_fd(int fd) : fd_(fd) {
-  }
-  unique_fd(const unique_fd&) = delete;
-  unique_fd& operator=(const unique_fd&) = delete;
-  ~unique_fd() {
-    reset();
-  }
-  int get() const {
-    return fd_;
-  }
-  void reset(int fd = -1) {
-    if (fd_ >= 0)
-      ::close(fd_);
-    fd_ = fd;
-  }
-  explicit operator bool() const {
-    return fd_ >= 0;
-  }
-
-private:
-  int fd_ = -1;
-};
 
 /// Errors with which a CAN socket says its interface is gone or down.
 bool is_down_error(int err) {
@@ -193,10 +173,6 @@ struct can_config {
   uint64_t seed = 0;
   bool create = true;
 };
-
-std::string station_file(uint64_t node) {
-  return std::to_string(node) + ".sock";
-}
 
 caf::expected<can_config> read_config(const device_config& cfg) {
   option_reader r{cfg};
@@ -869,87 +845,6 @@ struct bus_lock {
   }
 };
 
-/// Parses "N.sock" with N a node id 1..254; 0 otherwise.
-uint64_t parse_station_file(const char* name) {
-  uint64_t n = 0;
-  size_t i = 0;
-  for (; name[i] >= '0' && name[i] <= '9'; ++i) {
-    if (i >= 3)
-      return 0;
-    n = n * 10 + static_cast<uint64_t>(name[i] - '0');
-  }
-  if (i == 0 || name[0] == '0' || std::strcmp(name + i, ".sock") != 0)
-    return 0;
-  return n >= 1 && n <= 254 ? n : 0;
-}
-
-sockaddr_un unix_addr(const std::string& path) {
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  std::memcpy(addr.sun_path, path.data(),
-              std::min(path.size(), sizeof(addr.sun_path) - 1));
-  return addr;
-}
-
-enum class probe_result { live, stale, absent };
-
-/// Whether a process is bound to the datagram socket at `path`.
-probe_result probe_socket(const std::string& path) {
-  unique_fd fd{::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0)};
-  if (!fd)
-    return probe_result::live;
-  auto addr = unix_addr(path);
-  if (::connect(fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof(addr))
-      == 0)
-    return probe_result::live;
-  switch (errno) {
-    case ECONNREFUSED:
-      return probe_result::stale;
-    case ENOENT:
-      return probe_result::absent;
-    default:
-      return probe_result::live;
-  }
-}
-
-/// Node ids with a socket file in `dir`, ascending.
-std::vector<uint64_t> list_stations(const std::string& dir) {
-  std::vector<uint64_t> result;
-  if (auto* d = ::opendir(dir.c_str())) {
-    while (auto* e = ::readdir(d))
-      if (auto n = parse_station_file(e->d_name))
-        result.push_back(n);
-    ::closedir(d);
-  }
-  std::sort(result.begin(), result.end());
-  return result;
-}
-
-/// mkdir -p; returns 0 or an errno value.
-int make_dirs(const std::string& path) {
-  std::string prefix;
-  size_t pos = 0;
-  while (pos != std::string::npos) {
-    pos = path.find('/', pos + 1);
-    prefix = path.substr(0, pos);
-    if (prefix.empty())
-      continue;
-    if (::mkdir(prefix.c_str(), 0777) != 0 && errno != EEXIST)
-      return errno;
-  }
-  struct stat st;
-  if (::stat(path.c_str(), &st) != 0)
-    return errno;
-  return S_ISDIR(st.st_mode) ? 0 : ENOTDIR;
-}
-
-std::string join_numbers(const std::vector<uint64_t>& xs) {
-  std::string result;
-  for (auto x : xs)
-    result += (result.empty() ? "" : ", ") + std::to_string(x);
-  return result;
-}
-
 // -- emulated bus: the driver ------------------------------------------------------
 
 class emu_can_driver final : public can_driver {
@@ -1244,7 +1139,7 @@ private:
     auto& dir = cfg_.interface;
     std::vector<uint64_t> live;
     std::vector<uint64_t> stale;
-    for (auto n : list_stations(dir)) {
+    for (auto n : list_stations_in(dir)) {
       switch (probe_socket(dir + "/" + station_file(n))) {
         case probe_result::live: live.push_back(n); break;
         case probe_result::stale: stale.push_back(n); break;
@@ -1542,7 +1437,7 @@ private:
     if (peers_valid_ && gen == peers_generation_
         && now - peers_scanned_at_ < rescan_period_ns)
       return;
-    peers_ = list_stations(cfg_.interface);
+    peers_ = list_stations_in(cfg_.interface);
     peers_valid_ = true;
     peers_generation_ = gen;
     peers_scanned_at_ = now;

@@ -43,12 +43,29 @@
 
 #include "actors/runtime/error.hpp"
 #include "channels/drivers/emu_wire.hpp"
+#include "channels/drivers/medium_dir.hpp"
+#include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
 
 namespace herm {
 
 namespace {
+
+using posix::errno_text;
+using posix::now_ns;
+using posix::unique_fd;
+using namespace medium_dir;
+
+/// Stations of this kind with a socket file in `dir`.
+std::vector<uint64_t> list_stations_in(const std::string& dir) {
+  return list_stations(dir, emu::min_station, emu::max_station);
+}
+
+/// Parses "N.sock" for this kind's station range.
+uint64_t parse_station(const char* name) {
+  return parse_station_file(name, emu::min_station, emu::max_station);
+}
 
 // -- constants -------------------------------------------------------------------
 
@@ -97,43 +114,6 @@ static_assert(sizeof(medium_layout) == 64 + 8 * medium_slots,
 
 // -- small helpers ---------------------------------------------------------------
 
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
-
-std::string errno_text(int err) {
-  // std::strerror is not thread-safe; the generic category is.
-  return std::error_code(err, std::generic_category()).message();
-}
-
-/// Owns one file descriptor.
-class unique_fd {
-public:
-  unique_fd() = default;
-  explicit unique_fd(int fd) : fd_(fd) {}
-  unique_fd(const unique_fd&) = delete;
-  unique_fd& operator=(const unique_fd&) = delete;
-  unique_fd(unique_fd&& other) noexcept : fd_(other.release()) {}
-  unique_fd& operator=(unique_fd&& other) noexcept {
-    reset(other.release());
-    return *this;
-  }
-  ~unique_fd() { reset(); }
-  int get() const { return fd_; }
-  int release() { return std::exchange(fd_, -1); }
-  void reset(int fd = -1) {
-    if (fd_ >= 0)
-      ::close(fd_);
-    fd_ = fd;
-  }
-  explicit operator bool() const { return fd_ >= 0; }
-
-private:
-  int fd_ = -1;
-};
-
 /// Holds flock(LOCK_EX) on the medium file. Unlocks explicitly: the
 /// mapping keeps the open file description alive, so close() alone would
 /// keep the lock until munmap.
@@ -147,91 +127,6 @@ struct medium_lock {
       ::flock(fd.get(), LOCK_UN);
   }
 };
-
-std::string station_file(uint64_t station) {
-  return std::to_string(station) + ".sock";
-}
-
-/// Parses "N.sock" with N a station number; 0 otherwise.
-uint64_t parse_station_file(const char* name) {
-  uint64_t n = 0;
-  size_t i = 0;
-  for (; name[i] >= '0' && name[i] <= '9'; ++i) {
-    if (i >= 3)
-      return 0;
-    n = n * 10 + static_cast<uint64_t>(name[i] - '0');
-  }
-  if (i == 0 || name[0] == '0' || std::strcmp(name + i, ".sock") != 0)
-    return 0;
-  return n >= emu::min_station && n <= emu::max_station ? n : 0;
-}
-
-sockaddr_un unix_addr(const std::string& path) {
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  std::memcpy(addr.sun_path, path.data(),
-              std::min(path.size(), sizeof(addr.sun_path) - 1));
-  return addr;
-}
-
-enum class probe_result { live, stale, absent };
-
-/// Whether a process is bound to the datagram socket at `path`.
-probe_result probe_socket(const std::string& path) {
-  unique_fd fd{::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0)};
-  if (!fd)
-    return probe_result::live; // cannot tell: assume taken
-  auto addr = unix_addr(path);
-  if (::connect(fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof(addr))
-      == 0)
-    return probe_result::live;
-  switch (errno) {
-    case ECONNREFUSED:
-      return probe_result::stale;
-    case ENOENT:
-      return probe_result::absent;
-    default:
-      return probe_result::live; // e.g. EACCES: somebody else's, keep off
-  }
-}
-
-/// Station numbers with a socket file in `dir`, ascending.
-std::vector<uint64_t> list_stations(const std::string& dir) {
-  std::vector<uint64_t> result;
-  if (auto* d = ::opendir(dir.c_str())) {
-    while (auto* e = ::readdir(d))
-      if (auto n = parse_station_file(e->d_name))
-        result.push_back(n);
-    ::closedir(d);
-  }
-  std::sort(result.begin(), result.end());
-  return result;
-}
-
-/// mkdir -p; returns 0 or an errno value.
-int make_dirs(const std::string& path) {
-  std::string prefix;
-  size_t pos = 0;
-  while (pos != std::string::npos) {
-    pos = path.find('/', pos + 1);
-    prefix = path.substr(0, pos);
-    if (prefix.empty())
-      continue;
-    if (::mkdir(prefix.c_str(), 0777) != 0 && errno != EEXIST)
-      return errno;
-  }
-  struct stat st;
-  if (::stat(path.c_str(), &st) != 0)
-    return errno;
-  return S_ISDIR(st.st_mode) ? 0 : ENOTDIR;
-}
-
-std::string join_numbers(const std::vector<uint64_t>& xs) {
-  std::string result;
-  for (auto x : xs)
-    result += (result.empty() ? "" : ", ") + std::to_string(x);
-  return result;
-}
 
 // -- configuration ---------------------------------------------------------------
 
@@ -652,7 +547,7 @@ private:
   caf::error claim_station() {
     std::vector<uint64_t> live;
     std::vector<uint64_t> stale;
-    for (auto n : list_stations(cfg_.dir)) {
+    for (auto n : list_stations_in(cfg_.dir)) {
       switch (probe_socket(cfg_.dir + "/" + station_file(n))) {
         case probe_result::live: live.push_back(n); break;
         case probe_result::stale: stale.push_back(n); break;
@@ -899,7 +794,7 @@ private:
     if (peers_valid_ && gen == peers_generation_
         && now - peers_scanned_at_ < rescan_period_ns)
       return;
-    peers_ = list_stations(cfg_.dir);
+    peers_ = list_stations_in(cfg_.dir);
     peers_.erase(std::remove(peers_.begin(), peers_.end(), station_),
                  peers_.end());
     peers_valid_ = true;

@@ -41,12 +41,16 @@
 #include "actors/runtime/error.hpp"
 #include "channels/drivers/serial_framing.hpp"
 #include "channels/drivers/serial_settings.hpp"
+#include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
 
 namespace herm {
 
 namespace {
+
+using posix::errno_text;
+using posix::unique_fd;
 
 // -- constants -------------------------------------------------------------------
 
@@ -63,11 +67,6 @@ constexpr size_t tx_buffer_frames = 16;
 constexpr size_t rx_chunk = 4096;
 
 // -- helpers ---------------------------------------------------------------------
-
-std::string errno_text(int err) {
-  // std::strerror is not thread-safe; the generic category is.
-  return std::error_code(err, std::generic_category()).message();
-}
 
 int64_t now_ns() {
   timespec ts;
@@ -110,28 +109,6 @@ int64_t char_time_ns(const serial::char_format& fmt, uint64_t baud) {
                                - 1)
                               / baud);
 }
-
-/// Owns one file descriptor.
-class unique_fd {
-public:
-  explicit unique_fd(int fd = -1) : fd_(fd) {
-  }
-  unique_fd(const unique_fd&) = delete;
-  unique_fd& operator=(const unique_fd&) = delete;
-  ~unique_fd() {
-    if (fd_ >= 0)
-      ::close(fd_);
-  }
-  int get() const {
-    return fd_;
-  }
-  int release() {
-    return std::exchange(fd_, -1);
-  }
-
-private:
-  int fd_;
-};
 
 /// Applies raw mode, speed, character format and flow control to `fd`.
 /// Returns 0 or an errno value; sets `what` to the setting that did not take.

@@ -35,12 +35,16 @@
 
 #include "actors/runtime/error.hpp"
 #include "channels/drivers/udp_addr.hpp"
+#include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
 
 namespace herm {
 
 namespace {
+
+using posix::errno_text;
+using posix::unique_fd;
 
 /// IPv4 (20) and UDP (8) headers inside a 1500-byte Ethernet payload.
 constexpr uint32_t default_udp_mtu = 1500 - 20 - 8;
@@ -50,12 +54,6 @@ constexpr size_t max_batch = 32;
 
 /// Upper bound of the preallocated receive memory (batch * MTU) in bytes.
 constexpr size_t max_rx_memory = size_t{1} << 20;
-
-std::string errno_text(int err) {
-  char buf[256];
-  // GNU strerror_r: returns a pointer to the text (maybe not into buf).
-  return strerror_r(err, buf, sizeof(buf));
-}
 
 /// Errors a UDP socket reports for something a peer or the path did (ICMP
 /// unreachable, a signal); the socket itself is fine.
@@ -75,30 +73,6 @@ bool is_transient(int err) {
       return false;
   }
 }
-
-/// Owns a descriptor until released.
-class unique_fd {
-public:
-  explicit unique_fd(int fd = -1) : fd_(fd) {
-  }
-  unique_fd(const unique_fd&) = delete;
-  unique_fd& operator=(const unique_fd&) = delete;
-  ~unique_fd() {
-    if (fd_ >= 0)
-      ::close(fd_);
-  }
-  int get() const {
-    return fd_;
-  }
-  int release() {
-    auto fd = fd_;
-    fd_ = -1;
-    return fd;
-  }
-
-private:
-  int fd_;
-};
 
 struct udp_settings {
   std::string device;
