@@ -318,7 +318,7 @@ INSTANTIATE_TEST_SUITE_P(
     topo_case{"star100", [] { return star(100, true); }, 3s},
     topo_case{"grid100", [] { return grid(10, 10, true); }, 5s},
     topo_case{"mesh100", [] { return mesh(100, 2); }, 5s}),
-  [](const auto& info) { return std::string{info.param.name}; });
+  [](const auto& param_info) { return std::string{param_info.param.name}; });
 
 TEST_F(routing_sim, traffic_moves_to_the_alternate_path_and_back) {
   auto t = ring(6, false);
@@ -350,9 +350,11 @@ TEST_F(routing_sim, a_dead_module_disappears_from_every_table_and_returns) {
   ASSERT_EQ(check_costs(net, t), 0u);
   net.kill(4); // the centre
   net.advance(2s); // lost hellos, retractions, expiry
-  for (size_t i = 0; i < t.n; ++i)
-    if (i != 4)
+  for (size_t i = 0; i < t.n; ++i) {
+    if (i != 4) {
       EXPECT_FALSE(net.route(i, id_of(4))) << "module " << i;
+    }
+  }
   // Traffic between corners still flows, around the centre.
   auto tag = net.send(0, id_of(8));
   EXPECT_EQ(net.path(tag).size(), 5u);
