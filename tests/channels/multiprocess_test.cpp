@@ -125,3 +125,14 @@ TEST(multiprocess, opening_a_bad_device_exits_with_a_typed_error) {
     << p.output();
   EXPECT_NE(p.output().find("300.1.2.3"), std::string::npos) << p.output();
 }
+
+// Bursts far beyond the driver's transmit queue (8 packets of up to 3 KB in
+// flight: thousands of 8-byte frames against a queue of 256): the channel
+// holds the overflow in its backlog and loses nothing.
+TEST(multiprocess, emulated_can_bus_bursts_beyond_the_driver_queue_lose_nothing) {
+  temp_dir dir;
+  auto bus = "emu:" + dir.path();
+  exchange({"-k", "can", "-i", bus, "-o", "node=2"},
+           {"-k", "can", "-i", bus, "-o", "node=1", "--timeout", "30"},
+           "local", "20", "3000", {"--window", "8"});
+}
