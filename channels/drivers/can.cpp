@@ -92,10 +92,6 @@ std::vector<uint64_t> list_stations_in(const std::string& dir) {
   return list_stations(dir, 1, 254);
 }
 
-/// Parses "N.sock" for this kind's station range.
-uint64_t parse_station(const char* name) {
-  return parse_station_file(name, 1, 254);
-}
 
 // -- constants -------------------------------------------------------------------
 

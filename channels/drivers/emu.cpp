@@ -62,10 +62,6 @@ std::vector<uint64_t> list_stations_in(const std::string& dir) {
   return list_stations(dir, emu::min_station, emu::max_station);
 }
 
-/// Parses "N.sock" for this kind's station range.
-uint64_t parse_station(const char* name) {
-  return parse_station_file(name, emu::min_station, emu::max_station);
-}
 
 // -- constants -------------------------------------------------------------------
 
