@@ -1,0 +1,546 @@
+#include "actors/marshal.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "caf/actor_system.hpp"
+#include "caf/atom.hpp"
+#include "caf/deserializer.hpp"
+#include "caf/detail/dynamic_message_data.hpp"
+#include "caf/sec.hpp"
+#include "caf/serializer.hpp"
+#include "caf/type_erased_value.hpp"
+#include "caf/uniform_type_info_map.hpp"
+
+#include "actors/runtime/error.hpp"
+
+namespace herm {
+
+namespace {
+
+// -- helpers -------------------------------------------------------------------
+
+/// Longest type name on the wire, in bytes.
+constexpr size_t max_type_name = 255;
+
+void write_leb128(byte_buffer& out, uint64_t x) {
+  while (x >= 0x80) {
+    out.push_back(static_cast<uint8_t>((x & 0x7f) | 0x80));
+    x >>= 7;
+  }
+  out.push_back(static_cast<uint8_t>(x));
+}
+
+template <class T>
+void write_le(byte_buffer& out, T x) {
+  static_assert(std::is_unsigned<T>::value, "write_le needs an unsigned type");
+  for (size_t i = 0; i < sizeof(T); ++i)
+    out.push_back(static_cast<uint8_t>(x >> (8 * i)));
+}
+
+bool is_no_context(const caf::error& err) {
+  return err.category() == caf::atom("system")
+         && err.code() == static_cast<uint8_t>(caf::sec::no_context);
+}
+
+const char* not_data_reason = "holds an actor handle, group, caf::message or "
+                              "caf::error; APO payloads carry plain data only";
+
+// -- encoder -------------------------------------------------------------------
+
+/// Writes HERM's APO encoding. Constructed without an execution unit on
+/// purpose: CAF then refuses every value that needs the actor system (actor
+/// handles, groups, nested messages) with sec::no_context instead of
+/// registering local actors for remote lookup.
+class apo_serializer final : public caf::serializer {
+public:
+  explicit apo_serializer(byte_buffer& out)
+    : caf::serializer(static_cast<caf::execution_unit*>(nullptr)), out_(out) {
+    // nop
+  }
+
+  const std::string& reason() const {
+    return reason_;
+  }
+
+  caf::error begin_object(uint16_t&, std::string&) override {
+    return fail(not_data_reason);
+  }
+
+  caf::error end_object() override {
+    return caf::none;
+  }
+
+  caf::error begin_sequence(size_t& n) override {
+    write_leb128(out_, n);
+    return caf::none;
+  }
+
+  caf::error end_sequence() override {
+    return caf::none;
+  }
+
+  caf::error apply_raw(size_t n, void* data) override {
+    auto first = static_cast<const uint8_t*>(data);
+    out_.insert(out_.end(), first, first + n);
+    return caf::none;
+  }
+
+protected:
+  caf::error apply_impl(int8_t& x) override {
+    return put(static_cast<uint8_t>(x));
+  }
+  caf::error apply_impl(uint8_t& x) override {
+    return put(x);
+  }
+  caf::error apply_impl(int16_t& x) override {
+    return put(static_cast<uint16_t>(x));
+  }
+  caf::error apply_impl(uint16_t& x) override {
+    return put(x);
+  }
+  caf::error apply_impl(int32_t& x) override {
+    return put(static_cast<uint32_t>(x));
+  }
+  caf::error apply_impl(uint32_t& x) override {
+    return put(x);
+  }
+  caf::error apply_impl(int64_t& x) override {
+    return put(static_cast<uint64_t>(x));
+  }
+  caf::error apply_impl(uint64_t& x) override {
+    return put(x);
+  }
+
+  caf::error apply_impl(float& x) override {
+    static_assert(sizeof(float) == 4, "float must be IEEE 754 binary32");
+    uint32_t bits;
+    std::memcpy(&bits, &x, sizeof(bits));
+    return put(bits);
+  }
+
+  caf::error apply_impl(double& x) override {
+    static_assert(sizeof(double) == 8, "double must be IEEE 754 binary64");
+    uint64_t bits;
+    std::memcpy(&bits, &x, sizeof(bits));
+    return put(bits);
+  }
+
+  caf::error apply_impl(long double&) override {
+    return fail("holds a long double, which has no portable encoding");
+  }
+
+  caf::error apply_impl(std::string& x) override {
+    write_leb128(out_, x.size());
+    out_.insert(out_.end(), x.begin(), x.end());
+    return caf::none;
+  }
+
+  caf::error apply_impl(std::u16string& x) override {
+    write_leb128(out_, x.size() * 2);
+    for (auto c : x)
+      write_le(out_, static_cast<uint16_t>(c));
+    return caf::none;
+  }
+
+  caf::error apply_impl(std::u32string& x) override {
+    write_leb128(out_, x.size() * 4);
+    for (auto c : x)
+      write_le(out_, static_cast<uint32_t>(c));
+    return caf::none;
+  }
+
+private:
+  template <class T>
+  caf::error put(T x) {
+    write_le(out_, x);
+    return caf::none;
+  }
+
+  caf::error fail(std::string what) {
+    reason_ = std::move(what);
+    return make_error(ec::invalid_parameter, reason_);
+  }
+
+  byte_buffer& out_;
+  std::string reason_;
+};
+
+// -- decoder -------------------------------------------------------------------
+
+/// Reads HERM's APO encoding from [pos, end). Every read checks the bytes
+/// left first; every length or count is checked against the bytes left and
+/// the limits before CAF allocates for it (CAF resizes byte buffers right
+/// after begin_sequence). No execution unit, so actor handles are refused.
+class apo_deserializer final : public caf::deserializer {
+public:
+  apo_deserializer(const uint8_t* begin, const uint8_t* pos, const uint8_t* end,
+                   const unmarshal_limits& limits)
+    : caf::deserializer(static_cast<caf::execution_unit*>(nullptr)),
+      begin_(begin),
+      pos_(pos),
+      end_(end),
+      limits_(limits) {
+    // nop
+  }
+
+  const std::string& reason() const {
+    return reason_;
+  }
+
+  size_t remaining() const {
+    return static_cast<size_t>(end_ - pos_);
+  }
+
+  size_t offset() const {
+    return static_cast<size_t>(pos_ - begin_);
+  }
+
+  /// Starts counting values anew for the next top-level element.
+  void start_element() {
+    values_ = 0;
+    depth_ = 0;
+    reason_.clear();
+  }
+
+  /// Reads a LEB128 length or count (minimal form, at most 64 bits).
+  caf::error read_leb128(uint64_t& x) {
+    uint64_t result = 0;
+    auto start = offset();
+    for (unsigned i = 0; i < 10; ++i) {
+      if (pos_ == end_)
+        return fail("truncated in a length at offset " + std::to_string(start));
+      auto b = *pos_++;
+      if (i == 9 && b > 1)
+        return fail("length at offset " + std::to_string(start)
+                    + " exceeds 64 bits");
+      result |= static_cast<uint64_t>(b & 0x7f) << (7 * i);
+      if ((b & 0x80) == 0) {
+        if (b == 0 && i > 0)
+          return fail("length at offset " + std::to_string(start)
+                      + " is not in minimal LEB128 form");
+        x = result;
+        return caf::none;
+      }
+    }
+    return fail("length at offset " + std::to_string(start) + " too long");
+  }
+
+  /// Reads a string of `n` bytes after checking both bounds.
+  caf::error read_text(size_t max, const char* what, std::string& x) {
+    uint64_t n = 0;
+    if (auto err = read_leb128(n))
+      return err;
+    if (n > max)
+      return fail(std::string{what} + " of " + std::to_string(n)
+                  + " bytes exceeds the limit of " + std::to_string(max));
+    if (n > remaining())
+      return truncated(n);
+    x.assign(reinterpret_cast<const char*>(pos_), static_cast<size_t>(n));
+    pos_ += n;
+    return caf::none;
+  }
+
+  caf::error fail(std::string what) {
+    reason_ = std::move(what);
+    return make_error(ec::invalid_parameter, reason_);
+  }
+
+  caf::error begin_object(uint16_t&, std::string&) override {
+    return fail(not_data_reason);
+  }
+
+  caf::error end_object() override {
+    return caf::none;
+  }
+
+  caf::error begin_sequence(size_t& n) override {
+    ++values_;
+    if (depth_ + 1 > limits_.max_depth)
+      return fail("value " + std::to_string(values_) + " nests deeper than "
+                  + std::to_string(limits_.max_depth) + " levels");
+    uint64_t count = 0;
+    if (auto err = read_leb128(count))
+      return err;
+    if (count > limits_.max_sequence)
+      return fail("value " + std::to_string(values_) + " announces "
+                  + std::to_string(count) + " elements, above the limit of "
+                  + std::to_string(limits_.max_sequence));
+    if (count > remaining())
+      return fail("value " + std::to_string(values_) + " announces "
+                  + std::to_string(count) + " elements but only "
+                  + std::to_string(remaining()) + " bytes follow");
+    ++depth_;
+    n = static_cast<size_t>(count);
+    return caf::none;
+  }
+
+  caf::error end_sequence() override {
+    if (depth_ > 0)
+      --depth_;
+    return caf::none;
+  }
+
+  caf::error apply_raw(size_t n, void* data) override {
+    if (n > remaining())
+      return truncated(n);
+    std::memcpy(data, pos_, n);
+    pos_ += n;
+    return caf::none;
+  }
+
+protected:
+  caf::error apply_impl(int8_t& x) override {
+    return get_signed<uint8_t>(x);
+  }
+  caf::error apply_impl(uint8_t& x) override {
+    return get(x);
+  }
+  caf::error apply_impl(int16_t& x) override {
+    return get_signed<uint16_t>(x);
+  }
+  caf::error apply_impl(uint16_t& x) override {
+    return get(x);
+  }
+  caf::error apply_impl(int32_t& x) override {
+    return get_signed<uint32_t>(x);
+  }
+  caf::error apply_impl(uint32_t& x) override {
+    return get(x);
+  }
+  caf::error apply_impl(int64_t& x) override {
+    return get_signed<uint64_t>(x);
+  }
+  caf::error apply_impl(uint64_t& x) override {
+    return get(x);
+  }
+
+  caf::error apply_impl(float& x) override {
+    uint32_t bits = 0;
+    if (auto err = get(bits))
+      return err;
+    std::memcpy(&x, &bits, sizeof(bits));
+    return caf::none;
+  }
+
+  caf::error apply_impl(double& x) override {
+    uint64_t bits = 0;
+    if (auto err = get(bits))
+      return err;
+    std::memcpy(&x, &bits, sizeof(bits));
+    return caf::none;
+  }
+
+  caf::error apply_impl(long double&) override {
+    ++values_;
+    return fail("value " + std::to_string(values_)
+                + " is a long double, which has no portable encoding");
+  }
+
+  caf::error apply_impl(std::string& x) override {
+    ++values_;
+    return read_text(limits_.max_string, "string", x);
+  }
+
+  caf::error apply_impl(std::u16string& x) override {
+    ++values_;
+    std::string raw;
+    if (auto err = read_text(limits_.max_string, "UTF-16 string", raw))
+      return err;
+    if (raw.size() % 2 != 0)
+      return fail("value " + std::to_string(values_)
+                  + ": UTF-16 string of odd byte length");
+    x.clear();
+    x.reserve(raw.size() / 2);
+    for (size_t i = 0; i < raw.size(); i += 2)
+      x.push_back(static_cast<char16_t>(
+        static_cast<uint8_t>(raw[i])
+        | (static_cast<uint16_t>(static_cast<uint8_t>(raw[i + 1])) << 8)));
+    return caf::none;
+  }
+
+  caf::error apply_impl(std::u32string& x) override {
+    ++values_;
+    std::string raw;
+    if (auto err = read_text(limits_.max_string, "UTF-32 string", raw))
+      return err;
+    if (raw.size() % 4 != 0)
+      return fail("value " + std::to_string(values_)
+                  + ": UTF-32 string whose byte length is not a multiple of 4");
+    x.clear();
+    x.reserve(raw.size() / 4);
+    for (size_t i = 0; i < raw.size(); i += 4) {
+      uint32_t c = 0;
+      for (size_t k = 0; k < 4; ++k)
+        c |= static_cast<uint32_t>(static_cast<uint8_t>(raw[i + k])) << (8 * k);
+      x.push_back(static_cast<char32_t>(c));
+    }
+    return caf::none;
+  }
+
+private:
+  caf::error truncated(uint64_t needed) {
+    return fail("truncated in value " + std::to_string(values_) + " (needs "
+                + std::to_string(needed) + " bytes at offset "
+                + std::to_string(offset()) + ", "
+                + std::to_string(remaining()) + " left)");
+  }
+
+  template <class T>
+  caf::error get(T& x) {
+    ++values_;
+    if (sizeof(T) > remaining())
+      return truncated(sizeof(T));
+    T result = 0;
+    for (size_t i = 0; i < sizeof(T); ++i)
+      result = static_cast<T>(result | (static_cast<T>(pos_[i]) << (8 * i)));
+    pos_ += sizeof(T);
+    x = result;
+    return caf::none;
+  }
+
+  // Two's complement on the wire; the conversion is defined via memcpy.
+  template <class U, class S>
+  caf::error get_signed(S& x) {
+    U tmp = 0;
+    if (auto err = get(tmp))
+      return err;
+    std::memcpy(&x, &tmp, sizeof(x));
+    return caf::none;
+  }
+
+  const uint8_t* begin_;
+  const uint8_t* pos_;
+  const uint8_t* end_;
+  const unmarshal_limits& limits_;
+  size_t values_ = 0;
+  size_t depth_ = 0;
+  std::string reason_;
+};
+
+std::string element_prefix(size_t i, const std::string& name) {
+  return "element " + std::to_string(i) + " (" + name + "): ";
+}
+
+caf::error element_error(size_t i, const std::string& name,
+                         const std::string& reason, const caf::error& err) {
+  if (!reason.empty())
+    return make_error(ec::invalid_parameter, element_prefix(i, name) + reason);
+  if (is_no_context(err))
+    return make_error(ec::invalid_parameter,
+                      element_prefix(i, name) + not_data_reason);
+  return make_error(ec::invalid_parameter,
+                    element_prefix(i, name) + render(err));
+}
+
+} // namespace
+
+// -- public interface ----------------------------------------------------------
+
+caf::expected<byte_buffer> marshal(caf::actor_system& sys,
+                                   const caf::message& msg) {
+  byte_buffer out;
+  out.push_back(apo_format_version);
+  write_leb128(out, msg.size());
+  apo_serializer sink{out};
+  auto& types = sys.types();
+  for (size_t i = 0; i < msg.size(); ++i) {
+    auto rtti = msg.type(i);
+    const std::string& name = types.portable_name(rtti);
+    if (name.empty() || name == types.default_type_name()
+        || name.size() > max_type_name)
+      return make_error(ec::invalid_parameter,
+                        "element " + std::to_string(i) + ": type '"
+                          + (rtti.second != nullptr ? rtti.second->name()
+                                                    : "?")
+                          + "' has no portable name in the actor system");
+    write_leb128(out, name.size());
+    out.insert(out.end(), name.begin(), name.end());
+    if (auto err = msg.save(i, sink))
+      return element_error(i, name, sink.reason(), err);
+  }
+  return out;
+}
+
+caf::expected<caf::message> unmarshal(caf::actor_system& sys,
+                                      const uint8_t* data, size_t size,
+                                      const unmarshal_limits& limits) {
+  if (size > limits.max_total)
+    return make_error(ec::invalid_parameter,
+                      "payload of " + std::to_string(size)
+                        + " bytes exceeds the limit of "
+                        + std::to_string(limits.max_total));
+  if (size == 0 || data == nullptr)
+    return make_error(ec::invalid_parameter, "empty payload");
+  if (data[0] != apo_format_version)
+    return make_error(ec::invalid_parameter,
+                      "unsupported APO format version "
+                        + std::to_string(data[0]) + " (this peer speaks "
+                        + std::to_string(apo_format_version) + ")");
+  apo_deserializer source{data, data + 1, data + size, limits};
+  uint64_t count = 0;
+  if (auto err = source.read_leb128(count))
+    return make_error(ec::invalid_parameter,
+                      "element count: " + source.reason());
+  if (count > limits.max_elements)
+    return make_error(ec::invalid_parameter,
+                      "message of " + std::to_string(count)
+                        + " elements exceeds the limit of "
+                        + std::to_string(limits.max_elements));
+  if (count > source.remaining())
+    return make_error(ec::invalid_parameter,
+                      "message announces " + std::to_string(count)
+                        + " elements but only "
+                        + std::to_string(source.remaining())
+                        + " bytes follow");
+  auto& types = sys.types();
+  caf::detail::dynamic_message_data::elements elements;
+  elements.reserve(static_cast<size_t>(count));
+  for (size_t i = 0; i < count; ++i) {
+    source.start_element();
+    std::string name;
+    if (auto err = source.read_text(max_type_name, "type name", name))
+      return make_error(ec::invalid_parameter, "element " + std::to_string(i)
+                                                 + ": " + source.reason());
+    auto value = types.make_value(name);
+    if (!value)
+      return make_error(ec::invalid_parameter, "element " + std::to_string(i)
+                                                 + ": unknown type '" + name
+                                                 + "'");
+    source.start_element();
+    if (auto err = value->load(source))
+      return element_error(i, name, source.reason(), err);
+    elements.emplace_back(std::move(value));
+  }
+  if (source.remaining() != 0)
+    return make_error(ec::invalid_parameter,
+                      std::to_string(source.remaining())
+                        + " trailing bytes after the last element (offset "
+                        + std::to_string(source.offset()) + ")");
+  caf::message result;
+  if (!elements.empty())
+    result = caf::message{caf::message::data_ptr{
+      new caf::detail::dynamic_message_data(std::move(elements)), false}};
+  // Only the canonical encoding of a message is valid: this refuses
+  // booleans other than 0 and 1, unsorted or duplicate map keys and any
+  // other input that would decode to the same value as different bytes.
+  auto again = marshal(sys, result);
+  if (!again)
+    return std::move(again.error());
+  if (again->size() != size || !std::equal(again->begin(), again->end(), data)) {
+    size_t at = 0;
+    while (at < size && at < again->size() && (*again)[at] == data[at])
+      ++at;
+    return make_error(ec::invalid_parameter,
+                      "non-canonical encoding: differs from the canonical "
+                      "form at offset "
+                        + std::to_string(at));
+  }
+  return result;
+}
+
+} // namespace herm
