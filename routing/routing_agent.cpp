@@ -247,13 +247,28 @@ void deliver(agent_impl self, const data_header& h, const byte_buffer& bytes) {
     return;
   }
   ++st.stats.delivered;
-  packet_delivered msg{h.src, h.protocol, h.priority,
-                       static_cast<uint8_t>(default_hop_limit - h.hop_limit),
+  // The originator sends with default_hop_limit and every forwarding
+  // module takes one off, so a packet from a neighbour arrives with the
+  // default (1 hop); one from this module never left it (0 hops).
+  uint8_t hops = h.src == st.table.self()
+                   ? 0
+                   : static_cast<uint8_t>(default_hop_limit - h.hop_limit + 1);
+  packet_delivered msg{h.src, h.protocol, h.priority, hops,
                        byte_buffer(bytes.begin() + data_header_size,
                                    bytes.end())};
   self->send(i->second, std::move(msg));
 }
 
+/// Puts an encoded data packet on the channel and neighbour of `nh`.
+void transmit(agent_impl self, const next_hop& nh, uint8_t priority,
+              byte_buffer bytes) {
+  auto i = self->state.channels.find(nh.channel);
+  if (i != self->state.channels.end())
+    self->send(i->second.handle,
+               write_packet{nh.neighbour, priority, std::move(bytes)});
+}
+
+/// Passes on a packet for another module, one hop limit less.
 void forward(agent_impl self, const data_header& h, byte_buffer bytes) {
   auto& st = self->state;
   if (h.hop_limit <= 1) {
@@ -267,10 +282,7 @@ void forward(agent_impl self, const data_header& h, byte_buffer bytes) {
   }
   set_hop_limit(bytes.data(), static_cast<uint8_t>(h.hop_limit - 1));
   ++st.stats.forwarded;
-  auto i = st.channels.find(nh->channel);
-  if (i != st.channels.end())
-    self->send(i->second.handle,
-               write_packet{nh->neighbour, h.priority, std::move(bytes)});
+  transmit(self, *nh, h.priority, std::move(bytes));
 }
 
 void on_data(agent_impl self, byte_buffer bytes) {
@@ -492,16 +504,14 @@ caf::error originate(agent_impl self, send_packet& msg) {
   }
   if (!is_unicast(msg.dst))
     return make_error(ec::no_route, "cannot send to " + to_hex(msg.dst));
-  if (!st.table.lookup(msg.dst, h.size_class)) {
+  auto nh = st.table.lookup(msg.dst, h.size_class);
+  if (!nh) {
     ++st.stats.dropped_no_route;
     return make_error(ec::no_route, "no route to module " + to_hex(msg.dst));
   }
   if (st.cfg.observer)
     st.cfg.observer(self_id, h, bytes);
-  h.hop_limit = default_hop_limit + 1; // forward() takes one off
-  set_hop_limit(bytes.data(), h.hop_limit);
-  --st.stats.forwarded; // forward() counts it; we originated it
-  forward(self, h, std::move(bytes));
+  transmit(self, *nh, h.priority, std::move(bytes));
   return caf::none;
 }
 

@@ -143,6 +143,12 @@ TEST_F(routing_sim, the_paper_testbed_routes_by_cost_and_size) {
   EXPECT_EQ(r->forwarding, "IEEE1394a-Ethernet");
   auto tag = net.send(vision, 0x4E, 100);
   EXPECT_EQ(net.path(tag), (std::vector<module_id>{0x30, 0x50, 0x4E}));
+  ASSERT_EQ(net.at(main).received->size(), 1u);
+  EXPECT_EQ(net.at(main).received->back().src, 0x30);
+  EXPECT_EQ(net.at(main).received->back().hops, 2u);
+  EXPECT_EQ(net.stats(vision).forwarded, 0u);
+  EXPECT_EQ(net.stats(vision).originated, 1u);
+  EXPECT_EQ(net.stats(mobile).forwarded, 1u);
   // Small sensor messages take the CAN bus (30 < 47); a 1,000-byte batch
   // takes RS232C (47 x 32 frames = 1,504 < 30 x 128 frames = 3,840).
   auto small = net.route(sensor, 0x4E, 0);
