@@ -1,6 +1,7 @@
 #include "routing/routing_agent.hpp"
 
 #include <algorithm>
+#include <deque>
 #include <map>
 #include <set>
 #include <random>
@@ -53,6 +54,14 @@ struct agent_state {
   bool flush_scheduled = false;
   /// When a seqno request for a destination was last sent.
   std::map<module_id, time_point> requested;
+  /// Flooded broadcasts seen, by (source, flood id), and the same keys in
+  /// arrival order for forgetting the oldest; bounded by cfg.max_flood_ids.
+  std::set<std::pair<module_id, uint32_t>> flood_ids;
+  std::deque<std::pair<time_point, std::pair<module_id, uint32_t>>> flood_order;
+  uint32_t next_flood_id = 1;
+  /// Route listeners and what they were told last, per destination.
+  std::vector<route_listener_actor> route_listeners;
+  std::map<module_id, reachability> told;
   routing_stats stats;
   uint16_t hello_seqno = 0;
   /// Hello intervals and quarter intervals since start.
@@ -153,8 +162,35 @@ void send_seqno_requests(agent_impl self, const std::vector<module_id>& dests) {
 /// Collects what changed; a flush message queued behind the messages being
 /// processed sends one triggered update for the whole burst (a cold start
 /// or a failure changes many destinations through many updates at once).
+void notify_reachability(agent_impl self, const std::vector<module_id>& dests) {
+  auto& st = self->state;
+  if (st.route_listeners.empty())
+    return;
+  for (auto d : dests) {
+    reachability now{d, false, 0, 0};
+    if (st.table.lookup(d, 0)) {
+      now.reachable = true;
+      if (auto adv = st.table.advertisement(d)) {
+        now.hops = adv->hops[0];
+        now.cost = adv->metrics[0];
+      }
+    }
+    auto i = st.told.find(d);
+    bool was = i != st.told.end();
+    if (now.reachable == was)
+      continue;
+    if (now.reachable)
+      st.told.emplace(d, now);
+    else
+      st.told.erase(i);
+    for (auto& l : st.route_listeners)
+      self->send(l, now);
+  }
+}
+
 void apply_change(agent_impl self, const table_change& change) {
   auto& st = self->state;
+  notify_reachability(self, change.changed);
   st.pending_changed.insert(change.changed.begin(), change.changed.end());
   st.pending_starving.insert(change.starving.begin(), change.starving.end());
   if (!st.flush_scheduled
@@ -254,7 +290,7 @@ void deliver(agent_impl self, const data_header& h, const byte_buffer& bytes) {
                    ? 0
                    : static_cast<uint8_t>(default_hop_limit - h.hop_limit + 1);
   packet_delivered msg{h.src, h.protocol, h.priority, hops,
-                       byte_buffer(bytes.begin() + data_header_size,
+                       byte_buffer(bytes.begin() + header_size(h),
                                    bytes.end())};
   self->send(i->second, std::move(msg));
 }
@@ -285,16 +321,62 @@ void forward(agent_impl self, const data_header& h, byte_buffer bytes) {
   transmit(self, *nh, h.priority, std::move(bytes));
 }
 
-void on_data(agent_impl self, byte_buffer bytes) {
+/// True the first time flood (src, id) is seen within the flood memory;
+/// records it.
+bool fresh_broadcast(agent_impl self, module_id src, uint32_t id) {
+  auto& st = self->state;
+  auto now = self->clock().now();
+  while (!st.flood_order.empty()
+         && (now - st.flood_order.front().first >= st.cfg.flood_memory
+             || st.flood_order.size() >= st.cfg.max_flood_ids)) {
+    st.flood_ids.erase(st.flood_order.front().second);
+    st.flood_order.pop_front();
+  }
+  auto key = std::make_pair(src, id);
+  if (!st.flood_ids.insert(key).second)
+    return false;
+  st.flood_order.emplace_back(now, key);
+  return true;
+}
+
+/// Sends a flooded broadcast on every channel but `except`.
+void relay_broadcast(agent_impl self, uint8_t priority, const byte_buffer& bytes,
+                     channel_id except) {
+  for (auto& kv : self->state.channels)
+    if (kv.first != except)
+      self->send(kv.second.handle, write_packet{broadcast_addr, priority, bytes});
+}
+
+void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
   auto& st = self->state;
   auto h = decode_data_header(bytes.data(), bytes.size());
   if (!h) {
     ++st.stats.rx_malformed;
     return;
   }
+  if (h->dst == broadcast_module) {
+    if (h->flood_id != 0) {
+      if (h->src == st.table.self() || !fresh_broadcast(self, h->src, h->flood_id)) {
+        ++st.stats.dropped_duplicate;
+        return;
+      }
+      if (st.cfg.observer)
+        st.cfg.observer(st.table.self(), *h, bytes);
+      deliver(self, *h, bytes);
+      if (h->hop_limit > 1) {
+        set_hop_limit(bytes.data(), static_cast<uint8_t>(h->hop_limit - 1));
+        ++st.stats.broadcasts_relayed;
+        relay_broadcast(self, h->priority, bytes, ch);
+      }
+      return;
+    }
+    // Link-local broadcast: for the neighbours that hear it only.
+    deliver(self, *h, bytes);
+    return;
+  }
   if (st.cfg.observer)
     st.cfg.observer(st.table.self(), *h, bytes);
-  if (h->dst == st.table.self() || h->dst == broadcast_module)
+  if (h->dst == st.table.self())
     deliver(self, *h, bytes);
   else
     forward(self, *h, std::move(bytes));
@@ -493,13 +575,26 @@ caf::error originate(agent_impl self, send_packet& msg) {
   h.size_class = size_class_of(msg.payload.size());
   h.priority = static_cast<uint8_t>(std::min<uint8_t>(msg.priority, 3));
   h.protocol = msg.protocol;
+  if (msg.dst == broadcast_module) {
+    h.flood_id = st.next_flood_id++;
+    if (st.next_flood_id == 0)
+      st.next_flood_id = 1;
+    fresh_broadcast(self, self_id, h.flood_id);
+  }
   byte_buffer bytes;
-  bytes.reserve(data_header_size + msg.payload.size());
+  bytes.reserve(header_size(h) + msg.payload.size());
   encode(h, bytes);
   bytes.insert(bytes.end(), msg.payload.begin(), msg.payload.end());
   ++st.stats.originated;
   if (msg.dst == self_id) {
     deliver(self, h, bytes);
+    return caf::none;
+  }
+  if (msg.dst == broadcast_module) {
+    ++st.stats.broadcasts_originated;
+    if (st.cfg.observer)
+      st.cfg.observer(self_id, h, bytes);
+    relay_broadcast(self, h.priority, bytes, 0);
     return caf::none;
   }
   if (!is_unicast(msg.dst))
@@ -535,10 +630,20 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
   acfg.claim_interval = init.cfg.hello_interval;
   init.alloc = std::make_unique<address_allocator>(acfg, instance, seed);
   init.stats.instance = instance;
+  // Flood ids start at a random point so that a restarted module's first
+  // broadcasts are not taken for duplicates of its previous life's.
+  init.next_flood_id = static_cast<uint32_t>(seed >> 32) | 1;
   self->send(io, atom::subscribe_v, caf::actor_cast<io_listener_actor>(self));
   // Channels tell their subscribers when they end; the IO manager's
   // channel_down carries the same news, and that is what we act on.
-  self->set_down_handler([](caf::down_msg&) {});
+  self->set_down_handler([self](caf::down_msg& msg) {
+    auto& ls = self->state.route_listeners;
+    ls.erase(std::remove_if(ls.begin(), ls.end(),
+                            [&](const route_listener_actor& l) {
+                              return l.address() == msg.source;
+                            }),
+             ls.end());
+  });
   act(self, init.alloc->start(self->clock().now()));
   self->send(self, atom::tick_v);
   return {
@@ -550,6 +655,20 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
     },
     [self](atom::subscribe, uint8_t protocol, network_receiver_actor& rcv) {
       self->state.receivers[protocol] = std::move(rcv);
+    },
+    [self](atom::subscribe, atom::routes, route_listener_actor& l) {
+      auto& st = self->state;
+      if (st.route_listeners.empty()) {
+        // Nobody listened: what was told is stale; tell the whole table.
+        st.told.clear();
+        st.route_listeners.push_back(l);
+        notify_reachability(self, st.table.destinations());
+      } else {
+        for (auto& kv : st.told)
+          self->send(l, kv.second);
+        st.route_listeners.push_back(l);
+      }
+      self->monitor(l);
     },
     [self](atom::get, atom::routes) -> std::vector<route_info> {
       auto& st = self->state;
@@ -631,7 +750,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       }
       switch (*type) {
         case packet_type::data:
-          on_data(self, std::move(pkt.bytes));
+          on_data(self, pkt.channel, std::move(pkt.bytes));
           break;
         case packet_type::hello:
           on_hello(self, pkt.channel, pkt.src, pkt.bytes);

@@ -22,7 +22,11 @@
 
 namespace herm {
 
-/// A data packet for another module.
+/// A data packet for another module, or for every module when `dst` is
+/// `broadcast_module`: then the packet is flooded (each module relays it
+/// once on every channel but the one it came from, duplicates suppressed,
+/// hop-limited) and delivered to every module's receiver of its protocol but
+/// the sender's.
 struct send_packet {
   module_id dst = no_module;
   uint8_t protocol = 0;
@@ -50,6 +54,27 @@ template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, packet_delivered& x) {
   return f(caf::meta::type_name("packet_delivered"), x.src, x.protocol,
            x.priority, x.hops, x.payload);
+}
+
+/// A destination became reachable or unreachable (a selected route of size
+/// class 0 appeared or went away); sent to route listeners.
+struct reachability {
+  module_id id = no_module;
+  bool reachable = false;
+  /// Of the selected route when reachable.
+  uint8_t hops = 0;
+  uint32_t cost = 0;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, reachability& x) {
+  return f(caf::meta::type_name("reachability"), x.id, x.reachable, x.hops,
+           x.cost);
+}
+
+inline bool operator==(const reachability& a, const reachability& b) {
+  return a.id == b.id && a.reachable == b.reachable && a.hops == b.hops
+         && a.cost == b.cost;
 }
 
 /// One neighbour as the agent sees it.
@@ -106,6 +131,9 @@ struct routing_stats {
   uint64_t dropped_no_route = 0;
   uint64_t dropped_hop_limit = 0;
   uint64_t dropped_no_receiver = 0;
+  uint64_t broadcasts_originated = 0;
+  uint64_t broadcasts_relayed = 0;
+  uint64_t dropped_duplicate = 0;
   uint64_t rx_malformed = 0;
   uint64_t rx_unknown_neighbour = 0;
   uint64_t rx_refused_routes = 0;
@@ -122,6 +150,7 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
   return f(caf::meta::type_name("routing_stats"), x.self, x.instance,
            x.assigned, x.renumberings, x.reachable, x.delivered, x.forwarded, x.originated,
            x.dropped_no_route, x.dropped_hop_limit, x.dropped_no_receiver,
+           x.broadcasts_originated, x.broadcasts_relayed, x.dropped_duplicate,
            x.rx_malformed, x.rx_unknown_neighbour, x.rx_refused_routes,
            x.tx_hellos, x.tx_updates, x.tx_update_entries, x.tx_claims,
            x.tx_conflicts, x.tx_seqno_requests);
@@ -131,6 +160,9 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
 /// layer).
 using network_receiver_actor = caf::typed_actor<caf::reacts_to<packet_delivered>>;
 
+/// Learns when destinations become reachable or unreachable.
+using route_listener_actor = caf::typed_actor<caf::reacts_to<reachability>>;
+
 using routing_agent_actor = caf::typed_actor<
   /// Sends a data packet; one-way: failures are counted.
   caf::reacts_to<send_packet>,
@@ -139,6 +171,10 @@ using routing_agent_actor = caf::typed_actor<
   caf::replies_to<atom::send, send_packet>::with<void>,
   /// Registers the receiver of one protocol.
   caf::reacts_to<atom::subscribe, uint8_t, network_receiver_actor>,
+  /// Registers a route listener: it gets one reachability message per
+  /// destination reachable now, then one per change; it is forgotten when
+  /// it exits.
+  caf::reacts_to<atom::subscribe, atom::routes, route_listener_actor>,
   caf::replies_to<atom::get, atom::routes>::with<std::vector<route_info>>,
   caf::replies_to<atom::get, atom::neighbors>::with<std::vector<neighbour_info>>,
   caf::replies_to<atom::get, atom::stats>::with<routing_stats>,
@@ -170,6 +206,10 @@ struct routing_config {
   /// every this many hello intervals, so that a holder of the
   /// same id in a partition that merged detects the conflict.
   uint32_t announce_every = 10;
+  /// How long a flooded broadcast's id is remembered to suppress its
+  /// duplicates, and how many ids at most (the oldest are forgotten first).
+  std::chrono::milliseconds flood_memory{30000};
+  size_t max_flood_ids = 8192;
   /// Instance nonce and seed for the address allocator; 0: random.
   uint64_t instance = 0;
   uint64_t seed = 0;

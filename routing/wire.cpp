@@ -25,7 +25,8 @@ constexpr size_t min_entry_size = entry_head_size + size_classes * class_metric_
 
 /// Offset of the hop limit in a data header, and the flags' reserved bits.
 constexpr size_t data_hop_limit_offset = 5;
-constexpr uint8_t data_reserved_flags = 0xF0;
+constexpr uint8_t data_reserved_flags = 0xE0;
+constexpr uint8_t data_flood_flag = 0x10;
 
 /// Largest link_code value on the wire.
 constexpr uint8_t max_link_code = static_cast<uint8_t>(link_code::rs232c);
@@ -201,13 +202,17 @@ caf::expected<packet_type> peek_type(const uint8_t* data, size_t size) {
 
 void encode(const data_header& h, byte_buffer& out) {
   assert(h.size_class < size_classes && h.priority <= 3);
+  assert(h.flood_id == 0 || h.dst == broadcast_module);
   writer w{out};
   w.u8(first_byte(packet_type::data));
   w.u16(h.src);
   w.u16(h.dst);
   w.u8(h.hop_limit);
-  w.u8(static_cast<uint8_t>((h.size_class & 0x03) | (h.priority & 0x03) << 2));
+  w.u8(static_cast<uint8_t>((h.size_class & 0x03) | (h.priority & 0x03) << 2
+                            | (h.flood_id != 0 ? data_flood_flag : 0)));
   w.u8(h.protocol);
+  if (h.flood_id != 0)
+    w.u32(h.flood_id);
 }
 
 caf::expected<data_header> decode_data_header(const uint8_t* data,
@@ -229,6 +234,16 @@ caf::expected<data_header> decode_data_header(const uint8_t* data,
   h.size_class = static_cast<uint8_t>(flags & 0x03);
   h.priority = static_cast<uint8_t>(flags >> 2 & 0x03);
   h.protocol = r.u8();
+  if ((flags & data_flood_flag) != 0) {
+    if (size < flood_header_size)
+      return bad(t, "truncated header: " + num(size) + " of "
+                      + num(flood_header_size) + " bytes (flood id)");
+    if (h.dst != broadcast_module)
+      return bad(t, "flood id on a packet to " + to_hex(h.dst));
+    h.flood_id = r.u32();
+    if (h.flood_id == 0)
+      return bad(t, "flood id 0");
+  }
   return h;
 }
 

@@ -46,14 +46,26 @@ struct data_header {
   uint8_t size_class = 0; ///< 0..size_classes-1
   uint8_t priority = 2;   ///< 0..3, lower is more urgent
   uint8_t protocol = 0;   ///< upper-layer protocol (0 raw, 1 APO messages, ...)
+  /// Non-zero on a flooded broadcast (dst == broadcast_module): with `src`
+  /// it names the flood for duplicate suppression. Travels as 4 more header
+  /// bytes, announced by flag bit 4. A broadcast without one is link-local:
+  /// delivered to the neighbours that hear it, never relayed.
+  uint32_t flood_id = 0;
 };
 
+/// Size of a data header without, and with, a flood id.
 constexpr size_t data_header_size = 8;
+constexpr size_t flood_header_size = 12;
+
+/// Where the payload starts in a packet with header `h`.
+constexpr size_t header_size(const data_header& h) {
+  return h.flood_id != 0 ? flood_header_size : data_header_size;
+}
 
 /// Appends the header; the payload follows.
 void encode(const data_header& h, byte_buffer& out);
 
-/// Decodes the header; the payload starts at data + data_header_size.
+/// Decodes the header; the payload starts at data + header_size(result).
 caf::expected<data_header> decode_data_header(const uint8_t* data, size_t size);
 
 /// Rewrites the hop limit in an encoded data packet (forwarding).

@@ -30,6 +30,9 @@ const char* to_string(ec x) {
     case ec::invalid_config: return "invalid_config";
     case ec::timeout: return "timeout";
     case ec::no_route: return "no_route";
+    case ec::unknown_type: return "unknown_type";
+    case ec::apo_gone: return "apo_gone";
+    case ec::not_found: return "not_found";
   }
   return "unknown_error_code";
 }

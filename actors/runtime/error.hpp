@@ -40,6 +40,13 @@ enum class ec : uint8_t {
   timeout,
   /// No route to the destination module.
   no_route,
+  /// A message names a type this module does not know (an APO payload whose
+  /// type name is not in the receiving module's type-ID blocks).
+  unknown_type,
+  /// The remote application object exited, or its module restarted.
+  apo_gone,
+  /// Nothing matched (discovery found no application object).
+  not_found,
 };
 
 /// Returns the enumerator's name, e.g. "unknown_device".

@@ -11,6 +11,7 @@
 
 #include "caf/type_id.hpp"
 
+#include "actors/app_support.hpp"
 #include "channels/channel_actor.hpp"
 #include "channels/device_actor.hpp"
 #include "channels/io_manager.hpp"
@@ -52,5 +53,17 @@ CAF_BEGIN_TYPE_ID_BLOCK(herm, caf::first_custom_type_id)
   CAF_ADD_TYPE_ID(herm, (herm::routing_stats))
   CAF_ADD_TYPE_ID(herm, (herm::network_receiver_actor))
   CAF_ADD_TYPE_ID(herm, (herm::routing_agent_actor))
+  CAF_ADD_TYPE_ID(herm, (herm::reachability))
+  CAF_ADD_TYPE_ID(herm, (herm::route_listener_actor))
+
+  // -- Application Support Layer ---------------------------------------------------
+  CAF_ADD_TYPE_ID(herm, (herm::apo_ref))
+  CAF_ADD_TYPE_ID(herm, (std::vector<herm::apo_ref>))
+  CAF_ADD_TYPE_ID(herm, (herm::apo_query))
+  CAF_ADD_TYPE_ID(herm, (herm::bind_request))
+  CAF_ADD_TYPE_ID(herm, (herm::apo_info))
+  CAF_ADD_TYPE_ID(herm, (std::vector<herm::apo_info>))
+  CAF_ADD_TYPE_ID(herm, (herm::app_support_stats))
+  CAF_ADD_TYPE_ID(herm, (herm::app_support_actor))
 
 CAF_END_TYPE_ID_BLOCK(herm)

@@ -212,16 +212,16 @@ public:
 
 private:
   void observe(module_id self, const data_header& h, const byte_buffer& bytes) {
-    if (bytes.size() < data_header_size + 8)
+    auto at = header_size(h);
+    if (h.protocol != 0 || bytes.size() < at + 8)
       return;
     uint64_t tag = 0;
-    for (int i = 0; i < 8; ++i)
-      tag |= uint64_t{bytes[data_header_size + i]} << (8 * i);
+    for (size_t i = 0; i < 8; ++i)
+      tag |= uint64_t{bytes[at + i]} << (8 * i);
     auto& p = paths_[tag];
     if (std::find(p.begin(), p.end(), self) != p.end())
       ++loops_;
     p.push_back(self);
-    (void) h;
   }
 
   deterministic_system& fx_;

@@ -353,3 +353,124 @@ TEST_F(routing_sim, malformed_routing_packets_are_counted_and_ignored) {
   // Routing still works.
   check_traffic(net, t, 4, 3);
 }
+
+// -- flooded broadcasts ----------------------------------------------------------
+
+TEST_F(routing_sim, a_broadcast_reaches_every_other_module_exactly_once) {
+  // A 3x3 grid with mixed link kinds has many paths between any two
+  // modules; every module but the sender must get the packet once.
+  auto t = grid(3, 3, true);
+  auto net = build(t);
+  net.advance(1s);
+  std::vector<size_t> before(t.n);
+  for (size_t i = 0; i < t.n; ++i)
+    before[i] = net.at(i).received->size();
+  net.send(4, broadcast_module, 40);
+  for (size_t i = 0; i < t.n; ++i) {
+    auto got = net.at(i).received->size() - before[i];
+    EXPECT_EQ(got, i == 4 ? 0u : 1u) << "module " << to_hex(id_of(i));
+    if (got == 1) {
+      auto& p = net.at(i).received->back();
+      EXPECT_EQ(p.src, id_of(4));
+      EXPECT_EQ(p.payload.size(), 40u);
+      EXPECT_GE(p.hops, 1u);
+    }
+  }
+  uint64_t relayed = 0, duplicates = 0;
+  for (size_t i = 0; i < t.n; ++i) {
+    relayed += net.stats(i).broadcasts_relayed;
+    duplicates += net.stats(i).dropped_duplicate;
+  }
+  // Each of the 8 receivers relays once; the copies that meet on the way are
+  // suppressed, not delivered.
+  EXPECT_EQ(relayed, 8u);
+  EXPECT_GT(duplicates, 0u);
+  EXPECT_EQ(net.stats(4).broadcasts_originated, 1u);
+  EXPECT_EQ(net.loops(), 0u);
+}
+
+TEST_F(routing_sim, a_broadcast_crosses_buses_and_small_mtu_links) {
+  // 0 -CAN bus- {1, 2}, 2 -RS232C- 3: relayed across a bus and re-fragmented.
+  topology t{4, {{{0, 1, 2}, "can2.0"}, {{2, 3}, "rs232c"}}};
+  auto net = build(t);
+  net.advance(2s);
+  net.send(0, broadcast_module, 200);
+  for (size_t i = 1; i < 4; ++i) {
+    ASSERT_EQ(net.at(i).received->size(), 1u) << "module " << i;
+    EXPECT_EQ(net.at(i).received->back().payload.size(), 200u);
+  }
+  EXPECT_EQ(net.at(3).received->back().hops, 2u);
+  EXPECT_EQ(net.at(0).received->size(), 0u);
+}
+
+TEST_F(routing_sim, a_broadcast_stops_at_its_hop_limit) {
+  // A line of 40 modules: the default hop limit (32) ends the flood.
+  auto t = line(40, false);
+  sim_network net{*this, test_prefix(), 1000ms};
+  for (size_t i = 0; i < t.n; ++i)
+    net.add_module(id_of(i));
+  for (auto& [members, kind] : t.links)
+    net.connect(members, kind);
+  net.start();
+  net.advance(3s);
+  net.send(0, broadcast_module, 16);
+  size_t reached = 0;
+  for (size_t i = 1; i < t.n; ++i)
+    reached += net.at(i).received->size();
+  EXPECT_EQ(reached, size_t{default_hop_limit});
+  EXPECT_EQ(net.at(32).received->size(), 1u);
+  EXPECT_EQ(net.at(33).received->size(), 0u);
+}
+
+// -- route listeners --------------------------------------------------------------
+
+namespace {
+
+using reach_log = std::vector<reachability>;
+
+route_listener_actor spawn_reach_probe(actor_fixture& fx,
+                                       std::shared_ptr<reach_log> log) {
+  return fx.track(fx.sys().spawn(
+    [log](route_listener_actor::pointer) -> route_listener_actor::behavior_type {
+      return {[log](reachability& x) { log->push_back(x); }};
+    }));
+}
+
+} // namespace
+
+TEST_F(routing_sim, route_listeners_learn_reachability_changes) {
+  auto t = line(3, false); // 0 - 1 - 2
+  auto net = build(t);
+  net.advance(1s);
+  auto log = std::make_shared<reach_log>();
+  auto probe = spawn_reach_probe(*this, log);
+  caf::anon_send(net.at(0).agent, atom::subscribe_v, atom::routes_v, probe);
+  run();
+  // The current table first: both others reachable.
+  ASSERT_EQ(log->size(), 2u);
+  std::map<module_id, reachability> now;
+  for (auto& r : *log)
+    now[r.id] = r;
+  EXPECT_TRUE(now[id_of(1)].reachable);
+  EXPECT_EQ(now[id_of(1)].hops, 1u);
+  EXPECT_TRUE(now[id_of(2)].reachable);
+  EXPECT_EQ(now[id_of(2)].hops, 2u);
+  EXPECT_EQ(now[id_of(2)].cost, 20u);
+  log->clear();
+  net.kill(2);
+  net.advance(1s);
+  ASSERT_EQ(log->size(), 1u);
+  EXPECT_EQ(log->back(), (reachability{id_of(2), false, 0, 0}));
+  log->clear();
+  net.start_module(2);
+  net.advance(1s);
+  ASSERT_EQ(log->size(), 1u);
+  EXPECT_EQ(log->back().id, id_of(2));
+  EXPECT_TRUE(log->back().reachable);
+  // A second listener starts from the same view.
+  auto log2 = std::make_shared<reach_log>();
+  auto probe2 = spawn_reach_probe(*this, log2);
+  caf::anon_send(net.at(0).agent, atom::subscribe_v, atom::routes_v, probe2);
+  run();
+  EXPECT_EQ(log2->size(), 2u);
+}

@@ -165,7 +165,7 @@ const std::vector<codec>& codecs() {
          return false;
        out.clear();
        encode(*h, out);
-       out.insert(out.end(), in.begin() + data_header_size, in.end());
+       out.insert(out.end(), in.begin() + header_size(*h), in.end());
        return true;
      }},
     make_codec("hello", packet_type::hello, decode_hello),
@@ -268,6 +268,41 @@ TEST(wire_layout, data_header_is_eight_bytes_little_endian_with_packed_flags) {
   EXPECT_EQ(enc(data_header{1, 2, 3, 1, 0, 0})[6], 0x01);
   EXPECT_EQ(enc(data_header{1, 2, 3, 0, 1, 0})[6], 0x04);
   EXPECT_EQ(enc(data_header{1, 2, 3, 3, 3, 0})[6], 0x0F);
+}
+
+TEST(wire_layout, a_flooded_broadcast_carries_a_flood_id_after_flag_bit_4) {
+  data_header h{0x004E, broadcast_module, 32, 0, 2, 1};
+  h.flood_id = 0x01020304;
+  EXPECT_EQ(enc(h), bytes({0x10, 0x4E, 0x00, 0xFF, 0xFF, 32, 0x18, 0x01,
+                           0x04, 0x03, 0x02, 0x01}));
+  EXPECT_EQ(header_size(h), 12u);
+  auto b = enc(h);
+  auto d = decode_data_header(b.data(), b.size());
+  ASSERT_TRUE(d);
+  EXPECT_EQ(d->flood_id, 0x01020304u);
+  EXPECT_EQ(header_size(*d), 12u);
+  // Without the flag a broadcast is link-local and has no flood id.
+  auto local = enc(data_header{0x4E, broadcast_module, 1, 0, 2, 1});
+  EXPECT_EQ(local.size(), 8u);
+  EXPECT_EQ(decode_data_header(local.data(), local.size())->flood_id, 0u);
+}
+
+TEST(wire_malformed, flood_ids_are_checked) {
+  data_header h{0x004E, broadcast_module, 32, 0, 2, 1};
+  h.flood_id = 7;
+  auto b = enc(h);
+  for (size_t n = 8; n < 12; ++n)
+    EXPECT_NE(error_of(decode_data_header(b.data(), n)).find("(flood id)"),
+              std::string::npos) << n;
+  auto unicast = b;
+  unicast[3] = 0x42;
+  unicast[4] = 0x00;
+  EXPECT_EQ(error_of(decode_data_header(unicast.data(), unicast.size())),
+            "data: flood id on a packet to 0x42");
+  auto zero = b;
+  zero[8] = 0;
+  EXPECT_EQ(error_of(decode_data_header(zero.data(), zero.size())),
+            "data: flood id 0");
 }
 
 TEST(wire_layout, encoders_append_to_what_the_buffer_holds) {
@@ -529,7 +564,7 @@ TEST(wire_malformed, a_bad_version_or_another_type_is_rejected_by_every_decoder)
 
 TEST(wire_malformed, data_headers_with_reserved_flag_bits_are_rejected) {
   auto good = enc(data_header{1, 2, 3, 3, 3, 0});
-  for (int bit = 4; bit < 8; ++bit) {
+  for (int bit = 5; bit < 8; ++bit) {
     SCOPED_TRACE(bit);
     auto b = good;
     b[6] = static_cast<uint8_t>(b[6] | 1 << bit);
