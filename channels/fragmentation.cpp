@@ -122,6 +122,16 @@ size_t fragmenter::frames_for(size_t size) const noexcept {
   return 1 + (rest + c.chunk - 1) / c.chunk;
 }
 
+void fragmenter::split(link_addr dst, const uint8_t* data, size_t size,
+                       const std::function<void(const uint8_t*, size_t)>& emit) {
+  if (tags_.size() >= max_destinations && tags_.count(dst) == 0)
+    tags_.clear();
+  auto& tag = tags_[dst];
+  next_tag_ = tag;
+  split(data, size, emit);
+  tag = next_tag_;
+}
+
 void fragmenter::split(const uint8_t* data, size_t size,
                        const std::function<void(const uint8_t*, size_t)>& emit) {
   auto tag = next_tag_;

@@ -51,10 +51,24 @@ public:
   void split(const uint8_t* data, size_t size,
              const std::function<void(const uint8_t*, size_t)>& emit);
 
+  /// Like split(), with one packet tag sequence per destination link
+  /// address. On a multi-access link a receiver hears only the packets
+  /// addressed to it (and broadcasts): with a tag sequence per destination
+  /// it still sees every tag of its own stream in order, which is what
+  /// tells a new packet from a late duplicate of an earlier one with the
+  /// same first frame (short frames make equal first frames common: on CAN
+  /// they hold only the routing header). Remembers at most
+  /// `max_destinations` sequences; beyond that it starts over.
+  void split(link_addr dst, const uint8_t* data, size_t size,
+             const std::function<void(const uint8_t*, size_t)>& emit);
+
+  static constexpr size_t max_destinations = 1024;
+
 private:
   uint32_t mtu_;
   uint8_t next_tag_ = 0;
   byte_buffer scratch_;
+  std::map<link_addr, uint8_t> tags_;
 };
 
 /// Bounds on reassembly. Whatever exceeds them is dropped and counted.

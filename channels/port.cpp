@@ -78,7 +78,7 @@ caf::expected<size_t> fragmenting_port::send(link_addr dst, uint8_t priority,
                         + std::to_string(reassembler_.limits().max_packet));
   size_t frames = 0;
   caf::error err;
-  fragmenter_.split(data, size, [&](const uint8_t* frame, size_t len) {
+  fragmenter_.split(dst, data, size, [&](const uint8_t* frame, size_t len) {
     if (err)
       return;
     auto res = inner_->send(dst, priority, frame, len);

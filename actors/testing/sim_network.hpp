@@ -7,6 +7,7 @@
 // it. Links can be cut and restored, modules killed and revived, and a
 // packet-path checker records every module a data packet visits.
 
+#include <functional>
 #include <map>
 #include <set>
 #include <string>
@@ -35,7 +36,14 @@ public:
     std::shared_ptr<delivery_log> received;
     std::vector<size_t> links;        ///< indexes into links_
     bool alive = false;
+    /// Set by `on_start` hooks (e.g. the application support actor).
+    caf::actor apps;
   };
+
+  /// Runs after a module's IO manager and agent started (every start, also
+  /// after `kill`): spawn what else the module runs, e.g. its application
+  /// support actor and APOs, tracked with `fx.track`.
+  std::function<void(size_t index, module& m)> on_start;
 
   struct link {
     std::string segment;
@@ -118,11 +126,15 @@ public:
                      channel_request{dev.name, "*", true});
     }
     m.alive = true;
+    if (on_start)
+      on_start(i, m);
   }
 
   /// Kills module `i` (its IO manager, links and agent end).
   void kill(size_t i) {
     auto& m = modules_[i];
+    if (m.apps)
+      caf::anon_send_exit(m.apps, caf::exit_reason::kill);
     caf::anon_send_exit(m.agent, caf::exit_reason::kill);
     caf::anon_send_exit(m.io, caf::exit_reason::kill);
     m.alive = false;

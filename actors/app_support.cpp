@@ -1,0 +1,1047 @@
+#include "actors/app_support.hpp"
+
+#include <algorithm>
+#include <functional>
+#include <map>
+#include <random>
+#include <set>
+
+#include "caf/actor_system.hpp"
+#include "caf/mailbox_element.hpp"
+#include "caf/make_message.hpp"
+#include "caf/stateful_actor.hpp"
+#include "caf/typed_event_based_actor.hpp"
+
+#include "actors/apo_proxy.hpp"
+#include "actors/app_table.hpp"
+#include "actors/runtime/error.hpp"
+#include "actors/runtime/type_ids.hpp"
+
+namespace herm {
+
+namespace {
+
+using time_point = std::chrono::steady_clock::time_point;
+
+/// A proxy and what it is bound to.
+struct binding {
+  caf::weak_actor_ptr proxy;
+  bool bound = false;
+  apo_ref target;
+  /// Rebinding proxies: what to look for while unbound.
+  bool rebind = false;
+  query_by by = query_by::name;
+  std::string pattern;
+  time_point next_search;
+  bool searching = false;
+  time_point last_watch;
+};
+
+/// A request sent to a remote APO, waiting for its response.
+struct outgoing {
+  caf::strong_actor_ptr sender;
+  caf::message_id mid;
+  uint32_t binding = 0;
+  module_id dst = no_module;
+  time_point deadline;
+};
+
+/// A request a remote module made of one of our APOs.
+struct served {
+  module_id origin = no_module;
+  uint64_t origin_id = 0;
+  time_point deadline;
+};
+
+/// A discovery in progress.
+struct discovery {
+  apo_query query;
+  std::set<apo_ref> found;
+  std::function<void(std::vector<apo_ref>)> finish;
+};
+
+struct topic_state {
+  // -- subscriber side --
+  std::vector<caf::actor> local_subs;
+  time_point next_refresh;
+  /// Last sequence number per publishing module.
+  std::map<module_id, uint32_t> last_seq;
+  // -- publisher side --
+  bool publishing = false;
+  uint32_t seq = 0;
+  bool has_last = false;
+  caf::message last;
+  byte_buffer last_payload;
+  /// Subscribed modules and when their lease ends.
+  std::map<module_id, time_point> remote_subs;
+};
+
+struct asl_state {
+  static inline const char* name = "herm.asl";
+
+  ~asl_state() {
+    // Proxies end with the layer; requests still waiting fail.
+    auto reason = make_error(ec::no_route, "the application support layer of "
+                                           "this module stopped");
+    for (auto& kv : bindings)
+      if (auto p = kv.second.proxy.lock())
+        detail::kill_apo_proxy(p, reason, nullptr);
+    for (auto& kv : pending)
+      if (kv.second.sender)
+        kv.second.sender->enqueue(nullptr, kv.second.mid.response_id(),
+                                  caf::make_message(reason), nullptr);
+  }
+
+  app_support_config cfg;
+  routing_agent_actor agent;
+  module_id self_id = no_module;
+  std::unique_ptr<app_table> table;
+  /// Local APOs: by number and by address.
+  std::map<uint32_t, caf::actor> apos;
+  std::map<caf::actor_addr, uint32_t> apo_of;
+  std::map<uint32_t, binding> bindings;
+  uint32_t next_binding = 1;
+  std::map<uint64_t, outgoing> pending;
+  uint64_t next_request = 1;
+  std::map<uint64_t, served> serving;
+  uint64_t next_served = 1;
+  std::map<uint32_t, discovery> discoveries;
+  uint32_t next_query = 1;
+  std::map<std::string, topic_state> topics;
+  /// Modules with a route now, and since when others lost theirs.
+  std::set<module_id> reachable;
+  std::map<module_id, time_point> unreachable_since;
+  caf::strong_actor_ptr sink;
+  uint32_t ticks = 0;
+  app_support_stats stats;
+  byte_buffer buf;
+};
+
+using asl_impl = app_support_actor::stateful_pointer<asl_state>;
+
+// -- small helpers -----------------------------------------------------------------
+
+std::string context_of(const caf::error& err) {
+  auto& ctx = err.context();
+  if (ctx.match_elements<std::string>())
+    return ctx.get_as<std::string>(0);
+  return ctx.empty() ? std::string{} : caf::to_string(ctx);
+}
+
+wire_error to_wire(const caf::error& err) {
+  wire_error result;
+  if (!err)
+    return result;
+  result.category = static_cast<uint64_t>(err.category());
+  result.code = err.code();
+  result.context = context_of(err);
+  if (result.context.size() > max_asl_string)
+    result.context.resize(max_asl_string);
+  return result;
+}
+
+caf::error from_wire(const wire_error& w) {
+  if (w.code == 0)
+    return caf::error{};
+  return caf::error{w.code, static_cast<caf::atom_value>(w.category),
+                    w.context.empty() ? caf::message{}
+                                      : caf::make_message(w.context)};
+}
+
+std::string describe(const apo_ref& ref) {
+  return "APO '" + ref.name + "' (" + std::to_string(ref.apo) + ") on module "
+         + to_hex(ref.module);
+}
+
+/// Sends an ASL message over the network.
+void transmit(asl_impl self, module_id dst, const asl_message& msg,
+              uint8_t priority = prio_normal) {
+  auto& st = self->state;
+  st.buf.clear();
+  encode(msg, st.buf);
+  self->send(st.agent, send_packet{dst, asl_protocol, priority, st.buf});
+}
+
+/// Delivers `msg` to `dst` as if `from` sent it with message id `mid`.
+void post(asl_impl self, const caf::strong_actor_ptr& dst,
+          caf::strong_actor_ptr from, caf::message_id mid, caf::message msg) {
+  if (dst)
+    dst->enqueue(std::move(from), mid, std::move(msg), self->context());
+}
+
+/// Answers a request with an error (one-way messages have nobody to tell).
+void refuse(asl_impl self, const caf::strong_actor_ptr& sender,
+            caf::message_id mid, caf::error err) {
+  if (mid.is_request())
+    post(self, sender, nullptr, mid.response_id(),
+         caf::make_message(std::move(err)));
+}
+
+bool reachable(asl_impl self, module_id m) {
+  return m == self->state.self_id || self->state.reachable.count(m) != 0;
+}
+
+// -- bindings ------------------------------------------------------------------------
+
+/// Fails every request waiting on binding `id` (or, with id 0, on module
+/// `dst`).
+void fail_pending(asl_impl self, uint32_t id, module_id dst,
+                  const caf::error& err) {
+  auto& st = self->state;
+  for (auto i = st.pending.begin(); i != st.pending.end();) {
+    if ((id != 0 && i->second.binding == id)
+        || (id == 0 && i->second.dst == dst)) {
+      post(self, i->second.sender, nullptr, i->second.mid.response_id(),
+           caf::make_message(err));
+      i = st.pending.erase(i);
+    } else {
+      ++i;
+    }
+  }
+}
+
+/// The target of binding `id` is gone for `reason` (the remote exit reason,
+/// or why it is unreachable). A rebinding proxy waits for a new target; any
+/// other ends, and its monitors learn `reason`.
+void lose_target(asl_impl self, uint32_t id, const caf::error& reason,
+                 const caf::error& request_error) {
+  auto& st = self->state;
+  auto i = st.bindings.find(id);
+  if (i == st.bindings.end())
+    return;
+  auto& b = i->second;
+  fail_pending(self, id, no_module, request_error);
+  if (b.rebind) {
+    b.bound = false;
+    b.next_search = self->clock().now();
+    return;
+  }
+  if (auto p = b.proxy.lock())
+    if (detail::kill_apo_proxy(p, reason, self->context()))
+      ++st.stats.proxies_ended;
+  st.bindings.erase(i);
+}
+
+/// Every binding to APO `apo` on module `m` (apo 0: any APO there).
+std::vector<uint32_t> bindings_to(asl_impl self, module_id m, uint32_t apo) {
+  std::vector<uint32_t> result;
+  for (auto& [id, b] : self->state.bindings)
+    if (b.bound && b.target.module == m && (apo == 0 || b.target.apo == apo))
+      result.push_back(id);
+  return result;
+}
+
+void watch(asl_impl self, binding& b) {
+  b.last_watch = self->clock().now();
+  if (b.target.module != self->state.self_id)
+    transmit(self, b.target.module, asl_watch{b.target.apo});
+}
+
+/// Points binding `b` at `ref`.
+void bind_to(asl_impl self, binding& b, const apo_ref& ref) {
+  b.bound = true;
+  b.target = ref;
+  watch(self, b);
+}
+
+/// A new proxy bound to `ref` (or, unbound, looking for `req`).
+caf::actor make_binding(asl_impl self, const apo_ref* ref,
+                        const bind_request* req) {
+  auto& st = self->state;
+  auto id = st.next_binding++;
+  auto proxy = detail::make_apo_proxy(self->system(),
+                                      caf::actor_cast<caf::actor>(self), id);
+  auto& b = st.bindings[id];
+  b.proxy = caf::actor_cast<caf::weak_actor_ptr>(proxy);
+  if (req != nullptr) {
+    b.rebind = req->rebind;
+    b.by = req->by;
+    b.pattern = req->pattern;
+  }
+  if (ref != nullptr)
+    bind_to(self, b, *ref);
+  else
+    b.next_search = self->clock().now();
+  return proxy;
+}
+
+// -- discovery ---------------------------------------------------------------------
+
+void finish_discovery(asl_impl self, uint32_t qid) {
+  auto& st = self->state;
+  auto i = st.discoveries.find(qid);
+  if (i == st.discoveries.end())
+    return;
+  auto d = std::move(i->second);
+  st.discoveries.erase(i);
+  std::vector<apo_ref> result(d.found.begin(), d.found.end());
+  // Local matches first, then by module and number.
+  std::stable_partition(result.begin(), result.end(), [&](const apo_ref& r) {
+    return r.module == st.self_id;
+  });
+  d.finish(std::move(result));
+}
+
+void discover(asl_impl self, apo_query q,
+              std::function<void(std::vector<apo_ref>)> finish) {
+  auto& st = self->state;
+  auto qid = st.next_query++;
+  if (st.next_query == 0)
+    st.next_query = 1;
+  auto& d = st.discoveries[qid];
+  d.query = q;
+  d.finish = std::move(finish);
+  for (auto& e : st.table->match(q.by, q.pattern))
+    d.found.insert(apo_ref{st.self_id, e.apo, e.name, e.type});
+  if (q.first && !d.found.empty()) {
+    finish_discovery(self, qid);
+    return;
+  }
+  transmit(self, broadcast_module, asl_query{qid, q.by, q.pattern});
+  ++st.stats.queries_sent;
+  self->delayed_send(self, std::chrono::milliseconds(q.timeout_ms),
+                     atom::done_v, qid);
+}
+
+void on_answer(asl_impl self, module_id src, asl_answer& a) {
+  auto& st = self->state;
+  ++st.stats.answers_received;
+  auto now = self->clock().now();
+  for (auto& e : a.entries)
+    st.table->learn(src, e, now);
+  auto i = st.discoveries.find(a.query_id);
+  if (i == st.discoveries.end())
+    return;
+  auto& d = i->second;
+  for (auto& e : a.entries)
+    if (app_table::matches(d.query.by, d.query.pattern, e.name, e.type))
+      d.found.insert(apo_ref{src, e.apo, e.name, e.type});
+  if (d.query.first && !d.found.empty())
+    finish_discovery(self, a.query_id);
+}
+
+void on_query(asl_impl self, module_id src, const asl_query& q) {
+  auto& st = self->state;
+  auto matches = st.table->match(q.by, q.pattern);
+  if (matches.empty())
+    return;
+  ++st.stats.queries_answered;
+  asl_answer a{q.query_id, {}};
+  for (auto& e : matches) {
+    a.entries.push_back(std::move(e));
+    if (a.entries.size() == max_answer_entries) {
+      transmit(self, src, a);
+      a.entries.clear();
+    }
+  }
+  if (!a.entries.empty())
+    transmit(self, src, a);
+}
+
+// -- requests ------------------------------------------------------------------------
+
+void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
+                caf::message_id mid, caf::message& msg) {
+  auto& st = self->state;
+  auto i = st.bindings.find(id);
+  if (i == st.bindings.end()) {
+    refuse(self, sender, mid, make_error(ec::apo_gone, "binding ended"));
+    return;
+  }
+  auto& b = i->second;
+  if (!b.bound) {
+    refuse(self, sender, mid,
+           make_error(ec::apo_gone, "no APO named '" + b.pattern
+                                      + "' is bound yet (looking for one)"));
+    return;
+  }
+  if (b.target.module == st.self_id) {
+    // A rebinding proxy whose match is here: hand it over unchanged.
+    auto a = st.apos.find(b.target.apo);
+    if (a == st.apos.end()) {
+      refuse(self, sender, mid, make_error(ec::apo_gone, describe(b.target)));
+      return;
+    }
+    post(self, caf::actor_cast<caf::strong_actor_ptr>(a->second),
+         std::move(sender), mid, std::move(msg));
+    return;
+  }
+  if (!reachable(self, b.target.module)) {
+    ++st.stats.dropped_no_route;
+    refuse(self, sender, mid,
+           make_error(ec::no_route, "no route to module "
+                                      + to_hex(b.target.module)));
+    return;
+  }
+  auto payload = marshal(self->system(), msg);
+  if (!payload) {
+    ++st.stats.tx_refused;
+    refuse(self, sender, mid, std::move(payload.error()));
+    return;
+  }
+  if (payload->size() > st.cfg.max_message) {
+    ++st.stats.tx_refused;
+    refuse(self, sender, mid,
+           make_error(ec::packet_too_large,
+                      "message of " + std::to_string(payload->size())
+                        + " bytes marshalled; the limit is "
+                        + std::to_string(st.cfg.max_message)));
+    return;
+  }
+  if (!mid.is_request()) {
+    ++st.stats.oneway_sent;
+    transmit(self, b.target.module,
+             asl_request{0, b.target.apo, std::move(*payload)});
+    return;
+  }
+  if (st.pending.size() >= st.cfg.max_pending) {
+    ++st.stats.tx_refused;
+    refuse(self, sender, mid,
+           make_error(ec::queue_full, std::to_string(st.pending.size())
+                                        + " remote requests outstanding"));
+    return;
+  }
+  auto rid = st.next_request++;
+  st.pending.emplace(rid, outgoing{std::move(sender), mid, id, b.target.module,
+                                   self->clock().now()
+                                     + st.cfg.request_timeout});
+  ++st.stats.requests_sent;
+  transmit(self, b.target.module,
+           asl_request{rid, b.target.apo, std::move(*payload)});
+}
+
+void respond_error(asl_impl self, module_id dst, uint64_t rid,
+                   const caf::error& err) {
+  if (rid == 0)
+    return;
+  asl_response r;
+  r.request_id = rid;
+  r.ok = false;
+  r.error = to_wire(err);
+  transmit(self, dst, r);
+}
+
+void on_request(asl_impl self, module_id src, asl_request& req) {
+  auto& st = self->state;
+  auto a = st.apos.find(req.apo);
+  if (a == st.apos.end()) {
+    ++st.stats.rx_unknown_apo;
+    respond_error(self, src, req.request_id,
+                  make_error(ec::apo_gone, "no APO " + std::to_string(req.apo)
+                                             + " on module "
+                                             + to_hex(st.self_id)));
+    return;
+  }
+  auto msg = unmarshal(self->system(), req.payload.data(), req.payload.size(),
+                       st.cfg.limits);
+  if (!msg) {
+    if (is(msg.error(), ec::unknown_type))
+      ++st.stats.rx_unknown_type;
+    else
+      ++st.stats.rx_malformed;
+    respond_error(self, src, req.request_id,
+                  make_error(static_cast<ec>(msg.error().code()),
+                             "module " + to_hex(st.self_id) + ": "
+                               + context_of(msg.error())));
+    return;
+  }
+  auto dst = caf::actor_cast<caf::strong_actor_ptr>(a->second);
+  if (req.request_id == 0) {
+    ++st.stats.oneway_delivered;
+    post(self, dst, nullptr, caf::make_message_id(), std::move(*msg));
+    return;
+  }
+  if (st.serving.size() >= st.cfg.max_pending) {
+    respond_error(self, src, req.request_id,
+                  make_error(ec::queue_full, "module " + to_hex(st.self_id)
+                                               + " is serving too many requests"));
+    return;
+  }
+  auto local = st.next_served++;
+  st.serving.emplace(local, served{src, req.request_id,
+                                   self->clock().now() + st.cfg.request_timeout});
+  ++st.stats.requests_served;
+  post(self, dst, st.sink, caf::make_message_id(local), std::move(*msg));
+}
+
+/// The local APO answered request `local` of a remote requester.
+void on_reply(asl_impl self, uint64_t local, caf::message& msg) {
+  auto& st = self->state;
+  auto i = st.serving.find(local);
+  if (i == st.serving.end())
+    return; // timed out meanwhile
+  auto s = i->second;
+  st.serving.erase(i);
+  if (msg.match_elements<caf::error>()) {
+    respond_error(self, s.origin, s.origin_id, msg.get_as<caf::error>(0));
+    return;
+  }
+  auto payload = marshal(self->system(), msg);
+  if (!payload) {
+    respond_error(self, s.origin, s.origin_id,
+                  make_error(ec::invalid_parameter,
+                             "the response cannot be marshalled: "
+                               + context_of(payload.error())));
+    return;
+  }
+  asl_response r;
+  r.request_id = s.origin_id;
+  r.ok = true;
+  r.payload = std::move(*payload);
+  transmit(self, s.origin, r);
+}
+
+void on_response(asl_impl self, module_id src, asl_response& r) {
+  auto& st = self->state;
+  auto i = st.pending.find(r.request_id);
+  if (i == st.pending.end() || i->second.dst != src) {
+    ++st.stats.rx_unexpected_response;
+    return;
+  }
+  auto out = std::move(i->second);
+  st.pending.erase(i);
+  ++st.stats.responses_received;
+  caf::strong_actor_ptr from;
+  if (auto b = st.bindings.find(out.binding); b != st.bindings.end())
+    from = b->second.proxy.lock();
+  if (!r.ok) {
+    auto err = from_wire(r.error);
+    post(self, out.sender, from, out.mid.response_id(), caf::make_message(err));
+    if (is(err, ec::apo_gone))
+      lose_target(self, out.binding, err, err);
+    return;
+  }
+  auto msg = unmarshal(self->system(), r.payload.data(), r.payload.size(),
+                       st.cfg.limits);
+  if (!msg) {
+    if (is(msg.error(), ec::unknown_type))
+      ++st.stats.rx_unknown_type;
+    else
+      ++st.stats.rx_malformed;
+    post(self, out.sender, from, out.mid.response_id(),
+         caf::make_message(msg.error()));
+    return;
+  }
+  post(self, out.sender, from, out.mid.response_id(), std::move(*msg));
+}
+
+// -- watching ------------------------------------------------------------------------
+
+void on_down_remote(asl_impl self, module_id src, const asl_down& d) {
+  auto& st = self->state;
+  st.table->forget(src, d.apo);
+  auto reason = from_wire(d.reason);
+  for (auto id : bindings_to(self, src, d.apo)) {
+    auto& b = st.bindings[id];
+    auto err = make_error(ec::apo_gone, describe(b.target) + " exited");
+    lose_target(self, id, reason ? reason : caf::error{}, err);
+  }
+}
+
+/// Local APO `apo` left the table (exited or unregistered).
+void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
+  auto& st = self->state;
+  auto entry = st.table->local(apo);
+  if (entry == nullptr)
+    return;
+  auto name = entry->name;
+  auto watchers = st.table->remove_local(apo);
+  if (auto a = st.apos.find(apo); a != st.apos.end()) {
+    st.apo_of.erase(a->second.address());
+    st.apos.erase(a);
+  }
+  ++st.stats.withdrawn;
+  for (auto m : watchers)
+    transmit(self, m, asl_down{apo, to_wire(reason)});
+  transmit(self, broadcast_module, asl_withdraw{apo, name});
+  // Rebinding proxies of this module bound to it.
+  for (auto id : bindings_to(self, st.self_id, apo))
+    lose_target(self, id, reason,
+                make_error(ec::apo_gone, "APO '" + name + "' exited"));
+}
+
+// -- topics --------------------------------------------------------------------------
+
+void deliver_local(asl_impl self, topic_state& ts, const caf::message& msg) {
+  for (auto& sub : ts.local_subs) {
+    post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
+         caf::make_message_id(), msg);
+    ++self->state.stats.publications_delivered;
+  }
+}
+
+void send_publication(asl_impl self, const std::string& topic,
+                      topic_state& ts, module_id dst) {
+  transmit(self, dst, asl_publish{topic, ts.seq, ts.last_payload});
+  ++self->state.stats.publications_sent;
+}
+
+void on_publish_local(asl_impl self, const std::string& topic,
+                      caf::message& msg) {
+  auto& st = self->state;
+  if (topic.empty() || topic.size() > max_asl_string) {
+    ++st.stats.tx_refused;
+    return;
+  }
+  auto payload = marshal(self->system(), msg);
+  if (!payload || payload->size() > st.cfg.max_message) {
+    ++st.stats.tx_refused;
+    return;
+  }
+  auto& ts = st.topics[topic];
+  if (!ts.publishing) {
+    ts.publishing = true;
+    // Subscribers that are already waiting answer with a subscription.
+    transmit(self, broadcast_module, asl_advertise{topic});
+  }
+  ++st.stats.published;
+  ++ts.seq;
+  ts.has_last = true;
+  ts.last = msg;
+  ts.last_payload = std::move(*payload);
+  deliver_local(self, ts, msg);
+  auto now = self->clock().now();
+  for (auto i = ts.remote_subs.begin(); i != ts.remote_subs.end();) {
+    if (i->second < now) {
+      i = ts.remote_subs.erase(i);
+      continue;
+    }
+    send_publication(self, topic, ts, i->first);
+    ++i;
+  }
+}
+
+void announce_subscription(asl_impl self, const std::string& topic,
+                           topic_state& ts, module_id dst) {
+  auto& cfg = self->state.cfg;
+  transmit(self, dst,
+           asl_subscribe{topic, static_cast<uint32_t>(
+                                  cfg.subscription_lease.count())});
+  ts.next_refresh = self->clock().now() + cfg.subscription_lease / 3;
+}
+
+void drop_subscriber(asl_impl self, const caf::actor_addr& who,
+                     const std::string* only) {
+  auto& st = self->state;
+  for (auto i = st.topics.begin(); i != st.topics.end();) {
+    auto& ts = i->second;
+    if (only == nullptr || i->first == *only) {
+      auto before = ts.local_subs.size();
+      ts.local_subs.erase(std::remove_if(ts.local_subs.begin(),
+                                         ts.local_subs.end(),
+                                         [&](const caf::actor& a) {
+                                           return a.address() == who;
+                                         }),
+                          ts.local_subs.end());
+      if (before > 0 && ts.local_subs.empty()) {
+        transmit(self, broadcast_module, asl_unsubscribe{i->first});
+        ts.last_seq.clear();
+      }
+    }
+    if (ts.local_subs.empty() && !ts.publishing)
+      i = st.topics.erase(i);
+    else
+      ++i;
+  }
+}
+
+void on_remote_publication(asl_impl self, module_id src, asl_publish& p) {
+  auto& st = self->state;
+  ++st.stats.publications_received;
+  auto i = st.topics.find(p.topic);
+  if (i == st.topics.end() || i->second.local_subs.empty())
+    return; // no longer interested; the lease runs out
+  auto& ts = i->second;
+  auto last = ts.last_seq.find(src);
+  if (last != ts.last_seq.end()) {
+    if (p.seq == last->second)
+      return; // the same value again (a late joiner's copy)
+    if (p.seq > last->second + 1)
+      st.stats.publications_lost += p.seq - last->second - 1;
+  }
+  ts.last_seq[src] = p.seq;
+  auto msg = unmarshal(self->system(), p.payload.data(), p.payload.size(),
+                       st.cfg.limits);
+  if (!msg) {
+    if (is(msg.error(), ec::unknown_type))
+      ++st.stats.rx_unknown_type;
+    else
+      ++st.stats.rx_malformed;
+    return;
+  }
+  deliver_local(self, ts, *msg);
+}
+
+void on_remote_subscribe(asl_impl self, module_id src, const asl_subscribe& s) {
+  auto& st = self->state;
+  auto i = st.topics.find(s.topic);
+  if (i == st.topics.end() || !i->second.publishing)
+    return;
+  auto& ts = i->second;
+  auto lease = std::chrono::milliseconds(
+    std::min<uint32_t>(s.lease_ms, 24 * 3600 * 1000));
+  bool fresh = ts.remote_subs.count(src) == 0;
+  ts.remote_subs[src] = self->clock().now() + lease;
+  if (fresh && ts.has_last)
+    send_publication(self, s.topic, ts, src); // a late joiner
+}
+
+// -- the network ---------------------------------------------------------------------
+
+void on_packet(asl_impl self, packet_delivered& pkt) {
+  auto& st = self->state;
+  auto msg = decode_asl(pkt.payload.data(), pkt.payload.size());
+  if (!msg) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  auto src = pkt.src;
+  if (!is_unicast(src)) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  std::visit(
+    [&](auto& x) {
+      using T = std::decay_t<decltype(x)>;
+      if constexpr (std::is_same_v<T, asl_query>) {
+        on_query(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_answer>) {
+        on_answer(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_request>) {
+        on_request(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_response>) {
+        on_response(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_watch>) {
+        if (!st.table->watch(x.apo, src))
+          transmit(self, src,
+                   asl_down{x.apo, to_wire(make_error(
+                                     ec::apo_gone,
+                                     "no APO " + std::to_string(x.apo)
+                                       + " on module " + to_hex(st.self_id)))});
+      } else if constexpr (std::is_same_v<T, asl_unwatch>) {
+        st.table->unwatch(x.apo, src);
+      } else if constexpr (std::is_same_v<T, asl_down>) {
+        on_down_remote(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_withdraw>) {
+        asl_down d{x.apo, to_wire(make_error(ec::apo_gone, "withdrawn"))};
+        on_down_remote(self, src, d);
+      } else if constexpr (std::is_same_v<T, asl_subscribe>) {
+        on_remote_subscribe(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_unsubscribe>) {
+        if (auto i = st.topics.find(x.topic); i != st.topics.end())
+          i->second.remote_subs.erase(src);
+      } else if constexpr (std::is_same_v<T, asl_publish>) {
+        on_remote_publication(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_advertise>) {
+        if (auto i = st.topics.find(x.topic);
+            i != st.topics.end() && !i->second.local_subs.empty())
+          announce_subscription(self, x.topic, i->second, src);
+      }
+    },
+    *msg);
+}
+
+// -- housekeeping ----------------------------------------------------------------------
+
+/// Module `m` stayed unreachable past the grace period.
+void module_lost(asl_impl self, module_id m) {
+  auto& st = self->state;
+  auto err = make_error(ec::no_route, "module " + to_hex(m) + " unreachable");
+  for (auto id : bindings_to(self, m, 0))
+    lose_target(self, id, err, err);
+  fail_pending(self, 0, m, err);
+  st.table->drop_watcher(m);
+  st.table->forget_module(m);
+  for (auto& kv : st.topics) {
+    kv.second.remote_subs.erase(m);
+    kv.second.last_seq.erase(m);
+  }
+}
+
+void rebind_found(asl_impl self, uint32_t id, std::vector<apo_ref>& found) {
+  auto& st = self->state;
+  auto i = st.bindings.find(id);
+  if (i == st.bindings.end())
+    return;
+  auto& b = i->second;
+  b.searching = false;
+  b.next_search = self->clock().now() + st.cfg.rebind_interval;
+  if (!found.empty() && !b.bound)
+    bind_to(self, b, found.front());
+}
+
+void rebind_search(asl_impl self, uint32_t id) {
+  auto& st = self->state;
+  auto& b = st.bindings[id];
+  b.searching = true;
+  apo_query q{b.by, b.pattern,
+              static_cast<uint32_t>(st.cfg.rebind_interval.count() / 2), true};
+  discover(self, q, [self, id](std::vector<apo_ref> found) {
+    rebind_found(self, id, found);
+  });
+}
+
+void tick(asl_impl self) {
+  auto& st = self->state;
+  auto now = self->clock().now();
+  if (++st.ticks % 10 == 1)
+    self->request(st.agent, caf::infinite, atom::get_v, atom::stats_v)
+      .then([self](routing_stats& rs) { self->state.self_id = rs.self; },
+            [](caf::error&) {});
+  // Modules gone for longer than the grace period.
+  for (auto i = st.unreachable_since.begin(); i != st.unreachable_since.end();) {
+    if (now - i->second >= st.cfg.unreachable_grace) {
+      auto m = i->first;
+      i = st.unreachable_since.erase(i);
+      module_lost(self, m);
+    } else {
+      ++i;
+    }
+  }
+  // Deadlines.
+  for (auto i = st.pending.begin(); i != st.pending.end();) {
+    if (i->second.deadline <= now) {
+      ++st.stats.request_timeouts;
+      post(self, i->second.sender, nullptr, i->second.mid.response_id(),
+           caf::make_message(make_error(
+             ec::timeout, "no response from module " + to_hex(i->second.dst)
+                            + " within "
+                            + std::to_string(st.cfg.request_timeout.count())
+                            + " ms")));
+      i = st.pending.erase(i);
+    } else {
+      ++i;
+    }
+  }
+  for (auto i = st.serving.begin(); i != st.serving.end();)
+    i = i->second.deadline <= now ? st.serving.erase(i) : std::next(i);
+  // Bindings: renew watches, look for new targets.
+  std::vector<uint32_t> search;
+  for (auto& [id, b] : st.bindings) {
+    if (b.bound && now - b.last_watch >= st.cfg.watch_refresh)
+      watch(self, b);
+    if (!b.bound && b.rebind && !b.searching && b.next_search <= now)
+      search.push_back(id);
+  }
+  for (auto id : search)
+    rebind_search(self, id);
+  // Topics: renew subscriptions, expire subscribers.
+  for (auto& [topic, ts] : st.topics) {
+    if (!ts.local_subs.empty() && ts.next_refresh <= now)
+      announce_subscription(self, topic, ts, broadcast_module);
+    for (auto i = ts.remote_subs.begin(); i != ts.remote_subs.end();)
+      i = i->second < now ? ts.remote_subs.erase(i) : std::next(i);
+  }
+  st.table->expire(now, st.cfg.remote_entry_ttl);
+  self->delayed_send(self, st.cfg.tick, atom::tick_v);
+}
+
+caf::error check_label(const std::string& what, const std::string& x) {
+  if (x.empty() || x.size() > max_asl_string)
+    return make_error(ec::invalid_parameter,
+                      what + " must be 1 to 255 bytes, got "
+                        + std::to_string(x.size()));
+  return caf::none;
+}
+
+// -- the actor -------------------------------------------------------------------------
+
+app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agent,
+                                         app_support_config cfg) {
+  auto& init = self->state;
+  init.cfg = cfg;
+  init.agent = agent;
+  std::random_device rd;
+  init.table = std::make_unique<app_table>(rd() | 1);
+  init.next_query = rd() | 1;
+  init.next_request = (uint64_t{rd()} << 20) + 1;
+  init.sink = detail::make_reply_sink(self->system(),
+                                      caf::actor_cast<caf::actor>(self));
+  self->send(agent, atom::subscribe_v, asl_protocol,
+             caf::actor_cast<network_receiver_actor>(self));
+  self->send(agent, atom::subscribe_v, atom::routes_v,
+             caf::actor_cast<route_listener_actor>(self));
+  self->set_down_handler([self](caf::down_msg& msg) {
+    auto& st = self->state;
+    if (auto i = st.apo_of.find(msg.source); i != st.apo_of.end())
+      withdraw(self, i->second, msg.reason);
+    drop_subscriber(self, msg.source, nullptr);
+  });
+  self->send(self, atom::tick_v);
+  return {
+    [self](atom::add, std::string& name, std::string& type,
+           caf::actor& apo) -> caf::result<apo_ref> {
+      auto& st = self->state;
+      if (auto err = check_label("an APO name", name))
+        return err;
+      if (auto err = check_label("an APO type", type))
+        return err;
+      if (!apo)
+        return make_error(ec::invalid_parameter, "invalid actor handle");
+      if (st.apo_of.count(apo.address()) != 0)
+        return make_error(ec::already_exists,
+                          "that actor is registered already (as '"
+                            + st.table->local(st.apo_of[apo.address()])->name
+                            + "')");
+      auto id = st.table->add_local(name, type);
+      st.apos.emplace(id, apo);
+      st.apo_of.emplace(apo.address(), id);
+      self->monitor(apo);
+      ++st.stats.registered;
+      return apo_ref{st.self_id, id, std::move(name), std::move(type)};
+    },
+    [self](atom::unregister, caf::actor& apo) {
+      auto& st = self->state;
+      if (auto i = st.apo_of.find(apo.address()); i != st.apo_of.end()) {
+        self->demonitor(apo);
+        withdraw(self, i->second,
+                 make_error(ec::apo_gone, "unregistered"));
+      }
+    },
+    [self](atom::get, atom::apps) -> std::vector<apo_info> {
+      auto& st = self->state;
+      auto now = self->clock().now();
+      std::vector<apo_info> result;
+      for (auto& [apo, e] : st.table->locals())
+        result.push_back(apo_info{apo_ref{st.self_id, apo, e.name, e.type}, true,
+                                  static_cast<uint32_t>(e.watchers.size()), 0});
+      for (auto& [key, e] : st.table->remotes())
+        result.push_back(apo_info{
+          apo_ref{key.first, key.second, e.name, e.type}, false, 0,
+          static_cast<uint32_t>(
+            std::chrono::duration_cast<std::chrono::milliseconds>(now - e.heard)
+              .count())});
+      return result;
+    },
+    [self](atom::find, apo_query& q) -> caf::result<std::vector<apo_ref>> {
+      if (q.by != query_by::any)
+        if (auto err = check_label("a pattern", q.pattern))
+          return err;
+      if (q.by == query_by::any)
+        q.pattern.clear();
+      auto rp = self->make_response_promise<std::vector<apo_ref>>();
+      discover(self, q, [rp](std::vector<apo_ref> found) mutable {
+        rp.deliver(std::move(found));
+      });
+      return rp;
+    },
+    [self](atom::bind, apo_ref& ref) -> caf::result<caf::actor> {
+      auto& st = self->state;
+      if (ref.module == st.self_id) {
+        auto i = st.apos.find(ref.apo);
+        if (i == st.apos.end())
+          return make_error(ec::apo_gone, describe(ref));
+        return i->second;
+      }
+      if (!reachable(self, ref.module))
+        return make_error(ec::no_route, "no route to module " + to_hex(ref.module));
+      return make_binding(self, &ref, nullptr);
+    },
+    [self](atom::bind, bind_request& req) -> caf::result<caf::actor> {
+      if (req.by != query_by::any)
+        if (auto err = check_label("a pattern", req.pattern))
+          return err;
+      auto rp = self->make_response_promise<caf::actor>();
+      apo_query q{req.by, req.pattern, req.timeout_ms, true};
+      discover(self, q, [self, rp, req](std::vector<apo_ref> found) mutable {
+        auto& st = self->state;
+        if (found.empty()) {
+          rp.deliver(make_error(ec::not_found,
+                                "no APO " + std::string{req.by == query_by::type
+                                                          ? "of type '"
+                                                          : "named '"}
+                                  + req.pattern + "' answered within "
+                                  + std::to_string(req.timeout_ms) + " ms"));
+          return;
+        }
+        auto& ref = found.front();
+        if (ref.module == st.self_id && !req.rebind) {
+          if (auto i = st.apos.find(ref.apo); i != st.apos.end())
+            rp.deliver(i->second);
+          else
+            rp.deliver(make_error(ec::apo_gone, describe(ref)));
+          return;
+        }
+        rp.deliver(make_binding(self, &ref, &req));
+      });
+      return rp;
+    },
+    [self](atom::publish, std::string& topic, caf::message& msg) {
+      on_publish_local(self, topic, msg);
+    },
+    [self](atom::subscribe, std::string& topic,
+           caf::actor& sub) -> caf::result<void> {
+      auto& st = self->state;
+      if (auto err = check_label("a topic", topic))
+        return err;
+      if (!sub)
+        return make_error(ec::invalid_parameter, "invalid actor handle");
+      auto& ts = st.topics[topic];
+      if (std::find(ts.local_subs.begin(), ts.local_subs.end(), sub)
+          != ts.local_subs.end())
+        return caf::unit;
+      ts.local_subs.push_back(sub);
+      self->monitor(sub);
+      if (ts.local_subs.size() == 1)
+        announce_subscription(self, topic, ts, broadcast_module);
+      if (ts.has_last)
+        post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
+             caf::make_message_id(), ts.last);
+      return caf::unit;
+    },
+    [self](atom::unsubscribe, std::string& topic, caf::actor& sub) {
+      drop_subscriber(self, sub.address(), &topic);
+    },
+    [self](atom::get, atom::stats) -> app_support_stats {
+      auto& st = self->state;
+      auto result = st.stats;
+      result.self = st.self_id;
+      result.local_apos = static_cast<uint32_t>(st.table->locals().size());
+      result.known_remote_apos = static_cast<uint32_t>(st.table->remotes().size());
+      result.live_bindings = static_cast<uint32_t>(st.bindings.size());
+      result.pending_requests = static_cast<uint32_t>(st.pending.size());
+      return result;
+    },
+    [self](packet_delivered& pkt) { on_packet(self, pkt); },
+    [self](reachability& r) {
+      auto& st = self->state;
+      if (r.reachable) {
+        st.reachable.insert(r.id);
+        st.unreachable_since.erase(r.id);
+      } else if (st.reachable.erase(r.id) > 0) {
+        st.unreachable_since.emplace(r.id, self->clock().now());
+      }
+    },
+    [self](atom::forward, uint32_t id, caf::strong_actor_ptr& sender,
+           uint64_t mid, caf::message& msg) {
+      on_forward(self, id, sender, caf::message_id{mid}, msg);
+    },
+    [self](atom::reply, uint64_t local, caf::message& msg) {
+      on_reply(self, local, msg);
+    },
+    [self](atom::close, uint32_t id) {
+      auto& st = self->state;
+      auto i = st.bindings.find(id);
+      if (i == st.bindings.end())
+        return;
+      auto target = i->second.target;
+      bool bound = i->second.bound;
+      st.bindings.erase(i);
+      if (bound && target.module != st.self_id
+          && bindings_to(self, target.module, target.apo).empty())
+        transmit(self, target.module, asl_unwatch{target.apo});
+    },
+    [self](atom::done, uint32_t qid) { finish_discovery(self, qid); },
+    [self](atom::tick) { tick(self); },
+  };
+}
+
+} // namespace
+
+app_support_actor spawn_app_support(caf::actor_system& sys,
+                                    routing_agent_actor agent,
+                                    app_support_config cfg) {
+  return sys.spawn(asl_fun, std::move(agent), std::move(cfg));
+}
+
+} // namespace herm

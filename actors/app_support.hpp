@@ -1,0 +1,226 @@
+#pragma once
+
+// Typed interface of the Application Support Layer: one application support
+// actor per module (section 3.3 of the HERM paper). It keeps the module's
+// application table, answers and issues discovery queries, binds local
+// actors to remote application objects (APOs) through proxies, watches
+// remote APOs for proxies' monitors, and carries publish/subscribe topics.
+//
+// An APO is an ordinary CAF actor. Registering it makes it discoverable;
+// binding to a remote one yields a proxy: a local `caf::actor` whose
+// messages and requests are marshalled (actors/marshal.hpp), routed and
+// delivered to the remote APO, and whose responses come back to the
+// requester's `then` callback. Wire format: actors/asl_wire.hpp.
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "caf/fwd.hpp"
+#include "caf/replies_to.hpp"
+#include "caf/typed_actor.hpp"
+
+#include "actors/asl_wire.hpp"
+#include "actors/marshal.hpp"
+#include "actors/runtime/atoms.hpp"
+#include "routing/routing_agent.hpp"
+
+namespace herm {
+
+/// An APO as the network knows it: the module hosting it, its number there
+/// (unique per module and never reused while the module runs), its name and
+/// its type (the interface it speaks).
+struct apo_ref {
+  module_id module = no_module;
+  uint32_t apo = 0;
+  std::string name;
+  std::string type;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, apo_ref& x) {
+  return f(caf::meta::type_name("apo_ref"), x.module, x.apo, x.name, x.type);
+}
+
+inline bool operator==(const apo_ref& a, const apo_ref& b) {
+  return a.module == b.module && a.apo == b.apo && a.name == b.name
+         && a.type == b.type;
+}
+
+inline bool operator<(const apo_ref& a, const apo_ref& b) {
+  return a.module != b.module ? a.module < b.module : a.apo < b.apo;
+}
+
+/// A discovery: every APO whose name (or type) is `pattern`, collected for
+/// `timeout_ms` (or until the first answer when `first`). Local matches are
+/// included. The result is sorted by module and APO number; empty if nothing
+/// answered in time.
+struct apo_query {
+  query_by by = query_by::name;
+  std::string pattern;
+  uint32_t timeout_ms = 500;
+  bool first = false;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, apo_query& x) {
+  return f(caf::meta::type_name("apo_query"), x.by, x.pattern, x.timeout_ms,
+           x.first);
+}
+
+/// Binding by name or type: discover, then bind the first match (a local
+/// match first). With `rebind`, the proxy outlives its target: when the APO
+/// exits or its module becomes unreachable, requests fail at once with
+/// ec::apo_gone until a new match appears (looked for every
+/// `app_support_config::rebind_interval`), then go to it. Without `rebind`
+/// the proxy ends with its target (monitors get a down message). Fails with
+/// ec::not_found when nothing answered within `timeout_ms`.
+struct bind_request {
+  query_by by = query_by::name;
+  std::string pattern;
+  uint32_t timeout_ms = 500;
+  bool rebind = false;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, bind_request& x) {
+  return f(caf::meta::type_name("bind_request"), x.by, x.pattern,
+           x.timeout_ms, x.rebind);
+}
+
+/// One row of the application table, for hermctl and tests.
+struct apo_info {
+  apo_ref ref;
+  bool local = false;
+  /// Local APOs: modules watching it. Remote: milliseconds since last heard.
+  uint32_t watchers = 0;
+  uint32_t age_ms = 0;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, apo_info& x) {
+  return f(caf::meta::type_name("apo_info"), x.ref, x.local, x.watchers,
+           x.age_ms);
+}
+
+/// Counters of one application support actor. Everything dropped is counted
+/// under the reason it was dropped.
+struct app_support_stats {
+  module_id self = no_module;
+  uint32_t local_apos = 0;
+  uint32_t known_remote_apos = 0;
+  uint32_t live_bindings = 0;
+  uint32_t pending_requests = 0;
+  uint64_t registered = 0;
+  uint64_t withdrawn = 0;
+  uint64_t queries_sent = 0;
+  uint64_t queries_answered = 0;
+  uint64_t answers_received = 0;
+  uint64_t requests_sent = 0;
+  uint64_t oneway_sent = 0;
+  uint64_t requests_served = 0;
+  uint64_t oneway_delivered = 0;
+  uint64_t responses_received = 0;
+  uint64_t request_timeouts = 0;
+  uint64_t proxies_ended = 0;
+  uint64_t published = 0;
+  uint64_t publications_sent = 0;
+  uint64_t publications_received = 0;
+  uint64_t publications_delivered = 0;
+  uint64_t publications_lost = 0;
+  uint64_t rx_malformed = 0;
+  uint64_t rx_unknown_apo = 0;
+  uint64_t rx_unknown_type = 0;
+  uint64_t rx_unexpected_response = 0;
+  uint64_t tx_refused = 0;
+  uint64_t dropped_no_route = 0;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, app_support_stats& x) {
+  return f(caf::meta::type_name("app_support_stats"), x.self, x.local_apos,
+           x.known_remote_apos, x.live_bindings, x.pending_requests,
+           x.registered, x.withdrawn, x.queries_sent, x.queries_answered,
+           x.answers_received, x.requests_sent, x.oneway_sent,
+           x.requests_served, x.oneway_delivered, x.responses_received,
+           x.request_timeouts, x.proxies_ended, x.published,
+           x.publications_sent, x.publications_received,
+           x.publications_delivered, x.publications_lost, x.rx_malformed,
+           x.rx_unknown_apo, x.rx_unknown_type, x.rx_unexpected_response,
+           x.tx_refused, x.dropped_no_route);
+}
+
+using app_support_actor = caf::typed_actor<
+  // -- application table --------------------------------------------------------
+  /// Registers an APO under a name and a type; it stays registered until it
+  /// exits or is unregistered, then its withdrawal is broadcast. Errors:
+  /// ec::invalid_parameter (empty or over 255-byte name or type, invalid
+  /// handle), ec::already_exists (that actor is registered already).
+  caf::replies_to<atom::add, std::string, std::string, caf::actor>::with<apo_ref>,
+  caf::reacts_to<atom::unregister, caf::actor>,
+  /// The application table: local APOs and the remote ones discovered.
+  caf::replies_to<atom::get, atom::apps>::with<std::vector<apo_info>>,
+  // -- discovery and binding ------------------------------------------------------
+  caf::replies_to<atom::find, apo_query>::with<std::vector<apo_ref>>,
+  /// A proxy for the APO `ref` names (the local actor itself if it is ours).
+  /// Errors: ec::apo_gone (not registered there), ec::no_route.
+  caf::replies_to<atom::bind, apo_ref>::with<caf::actor>,
+  caf::replies_to<atom::bind, bind_request>::with<caf::actor>,
+  // -- topics -------------------------------------------------------------------
+  /// Publishes one value of a topic to every subscriber, local and remote.
+  /// The last value is kept and given to subscribers that join later.
+  caf::reacts_to<atom::publish, std::string, caf::message>,
+  /// Subscribes `subscriber` (any actor) to a topic; it receives every value
+  /// as the message that was published. Ends when it exits or unsubscribes.
+  caf::replies_to<atom::subscribe, std::string, caf::actor>::with<void>,
+  caf::reacts_to<atom::unsubscribe, std::string, caf::actor>,
+  caf::replies_to<atom::get, atom::stats>::with<app_support_stats>,
+  // -- internal: the network, proxies, the reply sink, timers ---------------------
+  caf::reacts_to<packet_delivered>, caf::reacts_to<reachability>,
+  /// From a proxy: its binding, the sender, the caf::message_id value and
+  /// the message.
+  caf::reacts_to<atom::forward, uint32_t, caf::strong_actor_ptr, uint64_t,
+                 caf::message>,
+  /// From the reply sink: the local request number and the response.
+  caf::reacts_to<atom::reply, uint64_t, caf::message>,
+  /// From a proxy's destructor: nobody holds binding `id` any longer.
+  caf::reacts_to<atom::close, uint32_t>,
+  /// A discovery's collection time is over.
+  caf::reacts_to<atom::done, uint32_t>, caf::reacts_to<atom::tick>>;
+
+/// Timers and bounds of one application support actor.
+struct app_support_config {
+  /// Housekeeping period: request deadlines, leases, rebinding.
+  std::chrono::milliseconds tick{100};
+  /// A request still unanswered after this fails with ec::timeout (the
+  /// requester's own `request(..., timeout)` may end it sooner).
+  std::chrono::milliseconds request_timeout{10000};
+  /// A module unreachable for this long ends the proxies bound to it
+  /// (ec::no_route); shorter outages while routes converge are ridden out.
+  std::chrono::milliseconds unreachable_grace{1000};
+  /// How often a rebinding proxy without a target looks for one.
+  std::chrono::milliseconds rebind_interval{1000};
+  /// How often watches of remote APOs are renewed (a module that restarted
+  /// answers that the APO is gone).
+  std::chrono::milliseconds watch_refresh{5000};
+  /// Subscriptions are leases, renewed at a third of this.
+  std::chrono::milliseconds subscription_lease{3000};
+  /// Remote APOs learned from answers are forgotten after this.
+  std::chrono::milliseconds remote_entry_ttl{60000};
+  /// Largest marshalled message; larger ones fail with ec::packet_too_large.
+  size_t max_message = 60 * 1024;
+  /// Most outstanding remote requests (then ec::queue_full) and the most
+  /// this module serves at once for others (then ec::queue_full to them).
+  size_t max_pending = 4096;
+  /// Bounds on what arrives.
+  unmarshal_limits limits;
+};
+
+/// Spawns the module's application support actor on top of its routing
+/// agent (it takes protocol `asl_protocol` and listens to routes).
+app_support_actor spawn_app_support(caf::actor_system& sys,
+                                    routing_agent_actor agent,
+                                    app_support_config cfg = {});
+
+} // namespace herm

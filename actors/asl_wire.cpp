@@ -1,0 +1,569 @@
+#include "actors/asl_wire.hpp"
+
+#include <algorithm>
+#include <cassert>
+#include <string>
+#include <type_traits>
+#include <utility>
+
+#include "actors/runtime/error.hpp"
+
+namespace herm {
+
+namespace {
+
+// -- layout ----------------------------------------------------------------------
+
+// Kind k is alternative k - 1 of asl_message: encode writes the kind from the
+// variant's index.
+template <asl_kind K, class T>
+constexpr bool kind_is
+  = std::is_same_v<std::variant_alternative_t<static_cast<size_t>(K) - 1,
+                                              asl_message>,
+                   T>;
+static_assert(kind_is<asl_kind::query, asl_query>);
+static_assert(kind_is<asl_kind::answer, asl_answer>);
+static_assert(kind_is<asl_kind::request, asl_request>);
+static_assert(kind_is<asl_kind::response, asl_response>);
+static_assert(kind_is<asl_kind::watch, asl_watch>);
+static_assert(kind_is<asl_kind::unwatch, asl_unwatch>);
+static_assert(kind_is<asl_kind::down, asl_down>);
+static_assert(kind_is<asl_kind::withdraw, asl_withdraw>);
+static_assert(kind_is<asl_kind::subscribe, asl_subscribe>);
+static_assert(kind_is<asl_kind::unsubscribe, asl_unsubscribe>);
+static_assert(kind_is<asl_kind::publish, asl_publish>);
+static_assert(kind_is<asl_kind::advertise, asl_advertise>);
+static_assert(std::variant_size_v<asl_message> == 12);
+
+/// Version and kind.
+constexpr size_t head_size = 2;
+
+/// Smallest answer entry: apo and two empty strings.
+constexpr size_t min_entry_size = 4 + 1 + 1;
+
+constexpr uint8_t max_kind = static_cast<uint8_t>(asl_kind::advertise);
+constexpr uint8_t max_query_by = static_cast<uint8_t>(query_by::any);
+
+const char* name_of(asl_kind k) {
+  switch (k) {
+    case asl_kind::query:
+      return "query";
+    case asl_kind::answer:
+      return "answer";
+    case asl_kind::request:
+      return "request";
+    case asl_kind::response:
+      return "response";
+    case asl_kind::watch:
+      return "watch";
+    case asl_kind::unwatch:
+      return "unwatch";
+    case asl_kind::down:
+      return "down";
+    case asl_kind::withdraw:
+      return "withdraw";
+    case asl_kind::subscribe:
+      return "subscribe";
+    case asl_kind::unsubscribe:
+      return "unsubscribe";
+    case asl_kind::publish:
+      return "publish";
+    case asl_kind::advertise:
+      return "advertise";
+  }
+  return "?";
+}
+
+std::string num(size_t x) {
+  return std::to_string(x);
+}
+
+std::string n_bytes(size_t n) {
+  return num(n) + (n == 1 ? " byte" : " bytes");
+}
+
+caf::error bad(const char* who, const std::string& what) {
+  return make_error(ec::invalid_parameter, std::string{who} + ": " + what);
+}
+
+/// How many bytes of `s` go on the wire: all of it up to max_asl_string,
+/// otherwise the longest prefix that does not split a UTF-8 sequence (the
+/// bytes from the cut on are dropped whole). Input that is not UTF-8 is cut
+/// at exactly max_asl_string.
+size_t wire_length(const std::string& s) {
+  if (s.size() <= max_asl_string)
+    return s.size();
+  auto continuation = [&](size_t i) {
+    return (static_cast<uint8_t>(s[i]) & 0xC0) == 0x80;
+  };
+  auto n = max_asl_string;
+  // s[n] is the first byte dropped; a UTF-8 sequence has at most 3
+  // continuation bytes after its lead byte.
+  for (int i = 0; i < 3 && continuation(n); ++i)
+    --n;
+  return continuation(n) ? max_asl_string : n;
+}
+
+// -- writing ---------------------------------------------------------------------
+
+/// Appends little-endian integers, strings and payloads.
+struct writer {
+  byte_buffer& out;
+
+  void u8(uint8_t x) {
+    out.push_back(x);
+  }
+
+  void u32(uint32_t x) {
+    for (int i = 0; i < 4; ++i)
+      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
+  }
+
+  void u64(uint64_t x) {
+    for (int i = 0; i < 8; ++i)
+      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
+  }
+
+  /// A name, type or topic: longer than max_asl_string is the caller's error
+  /// (sent truncated when assertions are off).
+  void str(const std::string& s) {
+    assert(s.size() <= max_asl_string);
+    text(s);
+  }
+
+  /// Free text (an error context): truncated to max_asl_string bytes.
+  void text(const std::string& s) {
+    auto n = wire_length(s);
+    u8(static_cast<uint8_t>(n));
+    out.insert(out.end(), s.begin(), s.begin() + static_cast<ptrdiff_t>(n));
+  }
+
+  /// The last field: the rest of the message, no length.
+  void rest(const byte_buffer& b) {
+    out.insert(out.end(), b.begin(), b.end());
+  }
+
+  void error(const wire_error& e) {
+    u64(e.category);
+    u8(e.code);
+    text(e.context);
+  }
+};
+
+void put(writer& w, const asl_query& x) {
+  w.u32(x.query_id);
+  w.u8(static_cast<uint8_t>(x.by));
+  if (x.by == query_by::any)
+    w.u8(0); // pattern ignored, sent empty
+  else
+    w.str(x.pattern);
+}
+
+void put(writer& w, const asl_answer& x) {
+  assert(x.entries.size() <= max_answer_entries);
+  auto count = std::min(x.entries.size(), max_answer_entries);
+  w.u32(x.query_id);
+  w.u8(static_cast<uint8_t>(count));
+  for (size_t i = 0; i < count; ++i) {
+    auto& e = x.entries[i];
+    w.u32(e.apo);
+    w.str(e.name);
+    w.str(e.type);
+  }
+}
+
+void put(writer& w, const asl_request& x) {
+  w.u64(x.request_id);
+  w.u32(x.apo);
+  w.rest(x.payload);
+}
+
+void put(writer& w, const asl_response& x) {
+  w.u64(x.request_id);
+  w.u8(x.ok ? 1 : 0);
+  if (x.ok)
+    w.rest(x.payload);
+  else
+    w.error(x.error);
+}
+
+void put(writer& w, const asl_watch& x) {
+  w.u32(x.apo);
+}
+
+void put(writer& w, const asl_unwatch& x) {
+  w.u32(x.apo);
+}
+
+void put(writer& w, const asl_down& x) {
+  w.u32(x.apo);
+  w.error(x.reason);
+}
+
+void put(writer& w, const asl_withdraw& x) {
+  w.u32(x.apo);
+  w.str(x.name);
+}
+
+void put(writer& w, const asl_subscribe& x) {
+  w.str(x.topic);
+  w.u32(x.lease_ms);
+}
+
+void put(writer& w, const asl_unsubscribe& x) {
+  w.str(x.topic);
+}
+
+void put(writer& w, const asl_publish& x) {
+  w.str(x.topic);
+  w.u32(x.seq);
+  w.rest(x.payload);
+}
+
+void put(writer& w, const asl_advertise& x) {
+  w.str(x.topic);
+}
+
+// -- reading ---------------------------------------------------------------------
+
+/// Names of the three fields of a wire_error in error messages.
+struct error_fields {
+  const char* category;
+  const char* code;
+  const char* context;
+};
+
+/// Reads the fields of one message of kind `who`, after the header. Every
+/// read checks the bytes left first and fails with an error naming the
+/// field; strings are allocated only once their bytes are known present.
+struct reader {
+  const char* who;
+  const uint8_t* data;
+  size_t size;
+  size_t pos = head_size;
+  /// The answer entry being read, from 1; 0 outside entries.
+  size_t entry = 0;
+
+  size_t left() const noexcept {
+    return size - pos;
+  }
+
+  caf::error fail(const std::string& what) const {
+    if (entry == 0)
+      return bad(who, what);
+    return bad(who, "entry " + num(entry) + ": " + what);
+  }
+
+  caf::error need(const char* field, size_t n) const {
+    if (left() >= n)
+      return caf::none;
+    return fail(std::string{field} + " truncated (needs " + n_bytes(n) + ", "
+                + num(left()) + " left)");
+  }
+
+  caf::error u8(const char* field, uint8_t& x) {
+    if (auto err = need(field, 1))
+      return err;
+    x = data[pos++];
+    return caf::none;
+  }
+
+  caf::error u32(const char* field, uint32_t& x) {
+    if (auto err = need(field, 4))
+      return err;
+    x = 0;
+    for (int i = 0; i < 4; ++i)
+      x |= uint32_t{data[pos + i]} << (8 * i);
+    pos += 4;
+    return caf::none;
+  }
+
+  caf::error u64(const char* field, uint64_t& x) {
+    if (auto err = need(field, 8))
+      return err;
+    x = 0;
+    for (int i = 0; i < 8; ++i)
+      x |= uint64_t{data[pos + i]} << (8 * i);
+    pos += 8;
+    return caf::none;
+  }
+
+  caf::error boolean(const char* field, bool& x) {
+    uint8_t b = 0;
+    if (auto err = u8(field, b))
+      return err;
+    if (b > 1)
+      return fail(std::string{field} + " is " + num(b) + ", expected 0 or 1");
+    x = b == 1;
+    return caf::none;
+  }
+
+  caf::error str(const char* field, std::string& x) {
+    if (left() < 1)
+      return fail(std::string{field} + " length truncated (needs 1 byte, 0 left)");
+    size_t n = data[pos++];
+    if (auto err = need(field, n))
+      return err;
+    x.assign(reinterpret_cast<const char*>(data + pos), n);
+    pos += n;
+    return caf::none;
+  }
+
+  void rest(byte_buffer& x) {
+    x.assign(data + pos, data + size);
+    pos = size;
+  }
+
+  caf::error error(const error_fields& f, wire_error& x) {
+    if (auto err = u64(f.category, x.category))
+      return err;
+    if (auto err = u8(f.code, x.code))
+      return err;
+    return str(f.context, x.context);
+  }
+};
+
+caf::error get(reader& r, asl_query& x) {
+  if (auto err = r.u32("query_id", x.query_id))
+    return err;
+  uint8_t by = 0;
+  if (auto err = r.u8("by", by))
+    return err;
+  if (by > max_query_by)
+    return r.fail("by " + num(by) + " unknown (0 name, 1 type, 2 any)");
+  x.by = static_cast<query_by>(by);
+  if (auto err = r.str("pattern", x.pattern))
+    return err;
+  if (x.by == query_by::any && !x.pattern.empty())
+    return r.fail("by any with a " + num(x.pattern.size())
+                  + "-byte pattern (must be empty)");
+  return caf::none;
+}
+
+caf::error get(reader& r, asl_answer& x) {
+  if (auto err = r.u32("query_id", x.query_id))
+    return err;
+  uint8_t count = 0;
+  if (auto err = r.u8("count", count))
+    return err;
+  if (count > max_answer_entries)
+    return r.fail(num(count) + " entries, at most " + num(max_answer_entries));
+  if (r.left() < count * min_entry_size)
+    return r.fail(num(count) + " entries need at least "
+                  + n_bytes(count * min_entry_size) + ", " + num(r.left())
+                  + " left");
+  x.entries.resize(count);
+  for (size_t i = 0; i < count; ++i) {
+    r.entry = i + 1;
+    auto& e = x.entries[i];
+    if (auto err = r.u32("apo", e.apo))
+      return err;
+    if (auto err = r.str("name", e.name))
+      return err;
+    if (auto err = r.str("type", e.type))
+      return err;
+  }
+  r.entry = 0;
+  return caf::none;
+}
+
+caf::error get(reader& r, asl_request& x) {
+  if (auto err = r.u64("request_id", x.request_id))
+    return err;
+  if (auto err = r.u32("apo", x.apo))
+    return err;
+  r.rest(x.payload);
+  return caf::none;
+}
+
+caf::error get(reader& r, asl_response& x) {
+  if (auto err = r.u64("request_id", x.request_id))
+    return err;
+  if (x.request_id == 0)
+    return r.fail("request_id 0 (one-way requests get no response)");
+  if (auto err = r.boolean("ok", x.ok))
+    return err;
+  if (x.ok) {
+    r.rest(x.payload);
+    return caf::none;
+  }
+  return r.error({"error.category", "error.code", "error.context"}, x.error);
+}
+
+caf::error get(reader& r, asl_watch& x) {
+  return r.u32("apo", x.apo);
+}
+
+caf::error get(reader& r, asl_unwatch& x) {
+  return r.u32("apo", x.apo);
+}
+
+caf::error get(reader& r, asl_down& x) {
+  if (auto err = r.u32("apo", x.apo))
+    return err;
+  return r.error({"reason.category", "reason.code", "reason.context"},
+                 x.reason);
+}
+
+caf::error get(reader& r, asl_withdraw& x) {
+  if (auto err = r.u32("apo", x.apo))
+    return err;
+  return r.str("name", x.name);
+}
+
+caf::error get(reader& r, asl_subscribe& x) {
+  if (auto err = r.str("topic", x.topic))
+    return err;
+  return r.u32("lease_ms", x.lease_ms);
+}
+
+caf::error get(reader& r, asl_unsubscribe& x) {
+  return r.str("topic", x.topic);
+}
+
+caf::error get(reader& r, asl_publish& x) {
+  if (auto err = r.str("topic", x.topic))
+    return err;
+  if (auto err = r.u32("seq", x.seq))
+    return err;
+  r.rest(x.payload);
+  return caf::none;
+}
+
+caf::error get(reader& r, asl_advertise& x) {
+  return r.str("topic", x.topic);
+}
+
+template <class T>
+caf::expected<asl_message> decode_as(reader& r) {
+  T x;
+  if (auto err = get(r, x))
+    return err;
+  if (r.left() != 0)
+    return r.fail(num(r.left())
+                  + (r.left() == 1 ? " trailing byte" : " trailing bytes"));
+  return asl_message{std::move(x)};
+}
+
+} // namespace
+
+// -- public interface ------------------------------------------------------------
+
+void encode(const asl_message& x, byte_buffer& out) {
+  writer w{out};
+  w.u8(asl_wire_version);
+  w.u8(static_cast<uint8_t>(x.index() + 1));
+  std::visit([&w](const auto& y) { put(w, y); }, x);
+}
+
+caf::expected<asl_kind> peek_asl_kind(const uint8_t* data, size_t size) {
+  if (size == 0 || data == nullptr)
+    return bad("asl", "empty message");
+  if (data[0] != asl_wire_version)
+    return bad("asl", "version " + num(data[0]) + ", expected "
+                        + num(asl_wire_version));
+  if (size < head_size)
+    return bad("asl", "kind truncated (needs 1 byte, 0 left)");
+  auto kind = data[1];
+  if (kind == 0 || kind > max_kind)
+    return bad("asl", "unknown kind " + num(kind));
+  return static_cast<asl_kind>(kind);
+}
+
+caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size) {
+  auto kind = peek_asl_kind(data, size);
+  if (!kind)
+    return std::move(kind.error());
+  reader r{name_of(*kind), data, size};
+  switch (*kind) {
+    case asl_kind::query:
+      return decode_as<asl_query>(r);
+    case asl_kind::answer:
+      return decode_as<asl_answer>(r);
+    case asl_kind::request:
+      return decode_as<asl_request>(r);
+    case asl_kind::response:
+      return decode_as<asl_response>(r);
+    case asl_kind::watch:
+      return decode_as<asl_watch>(r);
+    case asl_kind::unwatch:
+      return decode_as<asl_unwatch>(r);
+    case asl_kind::down:
+      return decode_as<asl_down>(r);
+    case asl_kind::withdraw:
+      return decode_as<asl_withdraw>(r);
+    case asl_kind::subscribe:
+      return decode_as<asl_subscribe>(r);
+    case asl_kind::unsubscribe:
+      return decode_as<asl_unsubscribe>(r);
+    case asl_kind::publish:
+      return decode_as<asl_publish>(r);
+    case asl_kind::advertise:
+      return decode_as<asl_advertise>(r);
+  }
+  return bad("asl", "unknown kind " + num(data[1])); // not reached
+}
+
+// -- equality --------------------------------------------------------------------
+
+bool operator==(const wire_error& a, const wire_error& b) {
+  return a.category == b.category && a.code == b.code
+         && a.context == b.context;
+}
+
+bool operator==(const asl_query& a, const asl_query& b) {
+  return a.query_id == b.query_id && a.by == b.by && a.pattern == b.pattern;
+}
+
+bool operator==(const asl_entry& a, const asl_entry& b) {
+  return a.apo == b.apo && a.name == b.name && a.type == b.type;
+}
+
+bool operator==(const asl_answer& a, const asl_answer& b) {
+  return a.query_id == b.query_id && a.entries == b.entries;
+}
+
+bool operator==(const asl_request& a, const asl_request& b) {
+  return a.request_id == b.request_id && a.apo == b.apo
+         && a.payload == b.payload;
+}
+
+bool operator==(const asl_response& a, const asl_response& b) {
+  if (a.request_id != b.request_id || a.ok != b.ok)
+    return false;
+  return a.ok ? a.payload == b.payload : a.error == b.error;
+}
+
+bool operator==(const asl_watch& a, const asl_watch& b) {
+  return a.apo == b.apo;
+}
+
+bool operator==(const asl_unwatch& a, const asl_unwatch& b) {
+  return a.apo == b.apo;
+}
+
+bool operator==(const asl_down& a, const asl_down& b) {
+  return a.apo == b.apo && a.reason == b.reason;
+}
+
+bool operator==(const asl_withdraw& a, const asl_withdraw& b) {
+  return a.apo == b.apo && a.name == b.name;
+}
+
+bool operator==(const asl_subscribe& a, const asl_subscribe& b) {
+  return a.topic == b.topic && a.lease_ms == b.lease_ms;
+}
+
+bool operator==(const asl_unsubscribe& a, const asl_unsubscribe& b) {
+  return a.topic == b.topic;
+}
+
+bool operator==(const asl_publish& a, const asl_publish& b) {
+  return a.topic == b.topic && a.seq == b.seq && a.payload == b.payload;
+}
+
+bool operator==(const asl_advertise& a, const asl_advertise& b) {
+  return a.topic == b.topic;
+}
+
+} // namespace herm

@@ -1,0 +1,611 @@
+// Actor-level tests of the Application Support Layer across 2 to 5 modules
+// in one process (in-process links with Table 1 profiles, CAF's
+// test_coordinator): registration, discovery, binding through proxies,
+// requests through a router module and over an 8-byte-MTU CAN link, remote
+// monitoring, rebinding, topics, and bad input.
+
+#include <algorithm>
+
+#include "caf/event_based_actor.hpp"
+#include "caf/typed_event_based_actor.hpp"
+
+#include "actors/asl_wire.hpp"
+#include "actors/marshal.hpp"
+#include "actors/testing/sim_apps.hpp"
+#include "tests/support/actor_fixture.hpp"
+
+using namespace herm;
+using namespace herm::test;
+using namespace herm::testkit;
+using namespace std::chrono_literals;
+
+namespace {
+
+std::string test_prefix() {
+  auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  std::string name = std::string{info->test_suite_name()} + "-" + info->name();
+  std::replace(name.begin(), name.end(), '/', '-');
+  return name;
+}
+
+module_id id_of(size_t i) {
+  return static_cast<module_id>(0x10 + i);
+}
+
+/// What a test APO or subscriber saw.
+struct seen {
+  std::vector<std::string> texts;
+  std::vector<int32_t> numbers;
+  std::vector<caf::down_msg> downs;
+  std::vector<caf::error> errors;
+};
+
+/// An APO that adds, echoes, fails on request, or never answers.
+caf::behavior calculator(caf::event_based_actor* self,
+                         std::shared_ptr<seen> log) {
+  return {
+    [](int32_t x, int32_t y) -> int32_t { return x + y; },
+    [log](std::string& text) -> std::string {
+      log->texts.push_back(text);
+      return "echo: " + text;
+    },
+    [](atom::get) -> caf::result<int32_t> {
+      return make_error(ec::invalid_parameter, "calculators do not get");
+    },
+    [self](atom::done) -> caf::result<int32_t> {
+      // Never answers: the promise is kept but not delivered.
+      auto rp = self->make_response_promise<int32_t>();
+      return rp;
+    },
+    [log](route_info& r) -> uint32_t {
+      // A HERM struct as a payload: travels by its inspect overload.
+      log->texts.push_back(r.forwarding);
+      return r.cost * 2;
+    },
+    [log](int32_t x) { log->numbers.push_back(x); },
+  };
+}
+
+/// Records what a topic delivers and what its monitors say.
+caf::behavior recorder(caf::event_based_actor* self, std::shared_ptr<seen> log) {
+  self->set_down_handler([log](caf::down_msg& msg) { log->downs.push_back(msg); });
+  return {
+    [log](int32_t x) { log->numbers.push_back(x); },
+    [log](std::string& x) { log->texts.push_back(x); },
+    [self](atom::add, caf::actor& x) { self->monitor(x); },
+  };
+}
+
+class asl_test : public actor_fixture {
+public:
+  asl_test() {
+    cfg.unreachable_grace = 300ms;
+    cfg.rebind_interval = 200ms;
+    cfg.request_timeout = 2s;
+    cfg.subscription_lease = 600ms;
+  }
+
+  /// Modules 0..n-1 with ids 0x10.., joined by `links`.
+  void build(size_t n,
+             std::vector<std::pair<std::vector<size_t>, std::string>> links) {
+    net = std::make_unique<sim_network>(*this, test_prefix());
+    for (size_t i = 0; i < n; ++i)
+      net->add_module(id_of(i));
+    for (auto& [members, kind] : links)
+      net->connect(members, kind);
+    add_app_support(*this, *net, cfg);
+    net->start();
+    net->advance(2s); // routes converge, every ASL knows its id
+  }
+
+  app_support_actor asl(size_t i) {
+    return apps_of(*net, i);
+  }
+
+  caf::actor spawn_calculator(std::shared_ptr<seen> log) {
+    return track(sys().spawn(calculator, log));
+  }
+
+  caf::actor spawn_recorder(std::shared_ptr<seen> log) {
+    return track(sys().spawn(recorder, log));
+  }
+
+  apo_ref add(size_t module, const std::string& name, const std::string& type,
+              caf::actor apo) {
+    auto res = call<apo_ref>(asl(module), atom::add_v, name, type, apo);
+    EXPECT_TRUE(res) << render(res.error());
+    return res ? std::get<0>(*res) : apo_ref{};
+  }
+
+  /// Runs a discovery and lets its timer fire.
+  std::vector<apo_ref> find(size_t module, apo_query q) {
+    auto result = std::make_shared<std::optional<std::vector<apo_ref>>>();
+    auto hdl = asl(module);
+    sys().spawn([=](caf::event_based_actor* self) {
+      self->request(hdl, caf::infinite, atom::find_v, q)
+        .then([=](std::vector<apo_ref>& xs) { *result = xs; },
+              [=](caf::error& err) { ADD_FAILURE() << render(err); });
+    });
+    advance(std::chrono::milliseconds(q.timeout_ms + 10));
+    return result->value_or(std::vector<apo_ref>{});
+  }
+
+  caf::expected<caf::actor> bind(size_t module, apo_ref ref) {
+    auto res = call<caf::actor>(asl(module), atom::bind_v, ref);
+    if (!res)
+      return res.error();
+    return std::get<0>(*res);
+  }
+
+  caf::expected<caf::actor> bind(size_t module, bind_request req) {
+    auto result = std::make_shared<std::optional<caf::expected<caf::actor>>>();
+    auto hdl = asl(module);
+    sys().spawn([=](caf::event_based_actor* self) {
+      self->request(hdl, caf::infinite, atom::bind_v, req)
+        .then([=](caf::actor& x) { *result = x; },
+              [=](caf::error& err) { *result = err; });
+    });
+    advance(std::chrono::milliseconds(req.timeout_ms + 10));
+    if (!*result)
+      return make_error(ec::timeout, "bind did not finish");
+    return **result;
+  }
+
+  /// Sends a request from a fresh actor and runs until its answer (or until
+  /// `wait` of simulated time passed).
+  template <class R, class... Ts>
+  caf::expected<R> ask(caf::actor dst, caf::timespan wait, Ts... xs) {
+    auto result = std::make_shared<std::optional<caf::expected<R>>>();
+    sys().spawn([=](caf::event_based_actor* self) {
+      self->request(dst, caf::infinite, xs...)
+        .then([=](R& r) { *result = r; },
+              [=](caf::error& err) { *result = err; });
+    });
+    run();
+    if (!*result)
+      advance(wait);
+    if (!*result)
+      return make_error(ec::timeout, "no answer in the test");
+    return **result;
+  }
+
+  app_support_stats stats(size_t i) {
+    auto res = call<app_support_stats>(asl(i), atom::get_v, atom::stats_v);
+    return res ? std::get<0>(*res) : app_support_stats{};
+  }
+
+  app_support_config cfg;
+  std::unique_ptr<sim_network> net;
+};
+
+} // namespace
+
+// -- application table and discovery ----------------------------------------------
+
+TEST_F(asl_test, discovery_finds_apos_by_name_and_type_on_every_module) {
+  build(3, {{{0, 1}, "ethernet"}, {{1, 2}, "can2.0"}});
+  auto log = std::make_shared<seen>();
+  auto a = add(1, "calc", "herm.example.calculator", spawn_calculator(log));
+  auto b = add(2, "calc2", "herm.example.calculator", spawn_calculator(log));
+  EXPECT_EQ(a.module, id_of(1));
+  EXPECT_EQ(b.module, id_of(2));
+  auto by_name = find(0, apo_query{query_by::name, "calc2", 200, false});
+  ASSERT_EQ(by_name.size(), 1u);
+  EXPECT_EQ(by_name[0], b);
+  auto by_type = find(0, apo_query{query_by::type, "herm.example.calculator",
+                                   200, false});
+  EXPECT_EQ(by_type, (std::vector<apo_ref>{a, b}));
+  // Local matches come first.
+  auto from2 = find(2, apo_query{query_by::type, "herm.example.calculator",
+                                 200, false});
+  ASSERT_EQ(from2.size(), 2u);
+  EXPECT_EQ(from2[0], b);
+  EXPECT_TRUE(find(0, apo_query{query_by::name, "nobody", 200, false}).empty());
+  // The querier's table now knows the remote APOs.
+  auto table = call<std::vector<apo_info>>(asl(0), atom::get_v, atom::apps_v);
+  ASSERT_TRUE(table);
+  EXPECT_EQ(std::get<0>(*table).size(), 2u);
+  EXPECT_EQ(stats(1).queries_answered + stats(2).queries_answered, 4u);
+}
+
+TEST_F(asl_test, registration_refuses_bad_names_and_double_registration) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto apo = spawn_calculator(std::make_shared<seen>());
+  add(0, "calc", "t", apo);
+  auto twice = call<apo_ref>(asl(0), atom::add_v, std::string{"again"},
+                             std::string{"t"}, apo);
+  ASSERT_FALSE(twice);
+  EXPECT_TRUE(is(twice.error(), ec::already_exists)) << render(twice.error());
+  auto empty = call<apo_ref>(asl(0), atom::add_v, std::string{}, std::string{"t"},
+                             spawn_calculator(std::make_shared<seen>()));
+  ASSERT_FALSE(empty);
+  EXPECT_TRUE(is(empty.error(), ec::invalid_parameter));
+  auto long_type = call<apo_ref>(asl(0), atom::add_v, std::string{"x"},
+                                 std::string(256, 't'),
+                                 spawn_calculator(std::make_shared<seen>()));
+  ASSERT_FALSE(long_type);
+  EXPECT_TRUE(is(long_type.error(), ec::invalid_parameter));
+}
+
+TEST_F(asl_test, an_apo_that_exits_is_withdrawn_everywhere) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto apo = spawn_calculator(std::make_shared<seen>());
+  add(1, "calc", "t", apo);
+  ASSERT_EQ(find(0, apo_query{query_by::name, "calc", 200, false}).size(), 1u);
+  caf::anon_send_exit(apo, caf::exit_reason::user_shutdown);
+  run();
+  EXPECT_TRUE(find(0, apo_query{query_by::name, "calc", 200, false}).empty());
+  auto table = call<std::vector<apo_info>>(asl(0), atom::get_v, atom::apps_v);
+  EXPECT_TRUE(std::get<0>(*table).empty()); // the withdrawal reached module 0
+  EXPECT_EQ(stats(1).withdrawn, 1u);
+}
+
+// -- binding and requests -----------------------------------------------------------
+
+TEST_F(asl_test, requests_cross_a_router_and_an_8_byte_mtu_link) {
+  // 0 -Ethernet- 1 -CAN (MTU 8)- 2: module 1 routes; every request and
+  // response to 2 is fragmented into CAN frames and reassembled.
+  build(3, {{{0, 1}, "ethernet"}, {{1, 2}, "can2.0"}});
+  auto log = std::make_shared<seen>();
+  add(2, "calc", "herm.example.calculator", spawn_calculator(log));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false});
+  ASSERT_TRUE(proxy) << render(proxy.error());
+  auto sum = ask<int32_t>(*proxy, 1s, int32_t{40}, int32_t{2});
+  ASSERT_TRUE(sum) << render(sum.error());
+  EXPECT_EQ(*sum, 42);
+  std::string text(300, 'x');
+  auto echo = ask<std::string>(*proxy, 1s, text);
+  ASSERT_TRUE(echo) << render(echo.error());
+  EXPECT_EQ(*echo, "echo: " + text);
+  route_info r;
+  r.cost = 21;
+  r.forwarding = "CAN2.0-Ethernet";
+  auto doubled = ask<uint32_t>(*proxy, 1s, r);
+  ASSERT_TRUE(doubled) << render(doubled.error());
+  EXPECT_EQ(*doubled, 42u);
+  EXPECT_EQ(log->texts.back(), "CAN2.0-Ethernet");
+  // A one-way message arrives too.
+  caf::anon_send(*proxy, int32_t{7});
+  run();
+  EXPECT_EQ(log->numbers, std::vector<int32_t>{7});
+  EXPECT_GE(net->stats(1).forwarded, 8u);
+  EXPECT_EQ(stats(0).requests_sent, 3u);
+  EXPECT_EQ(stats(2).requests_served, 3u);
+  EXPECT_EQ(stats(2).oneway_delivered, 1u);
+}
+
+TEST_F(asl_test, many_concurrent_requests_each_get_their_own_answer) {
+  build(2, {{{0, 1}, "can2.0"}});
+  add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false});
+  ASSERT_TRUE(proxy);
+  auto answers = std::make_shared<std::map<int32_t, int32_t>>();
+  auto dst = *proxy;
+  sys().spawn([=](caf::event_based_actor* self) {
+    for (int32_t i = 0; i < 50; ++i)
+      self->request(dst, caf::infinite, i, int32_t{1000})
+        .then([=](int32_t r) { (*answers)[i] = r; });
+  });
+  advance(2s);
+  ASSERT_EQ(answers->size(), 50u);
+  for (auto [i, r] : *answers)
+    EXPECT_EQ(r, i + 1000);
+}
+
+TEST_F(asl_test, failures_arrive_as_typed_errors) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto ref = add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, ref);
+  ASSERT_TRUE(proxy);
+  // The APO's own error, with its context, crosses the network.
+  auto own = ask<int32_t>(*proxy, 1s, atom::get_v);
+  ASSERT_FALSE(own);
+  EXPECT_TRUE(is(own.error(), ec::invalid_parameter)) << render(own.error());
+  EXPECT_NE(render(own.error()).find("calculators do not get"), std::string::npos);
+  // A message the APO has no handler for: CAF's unexpected_message.
+  auto unexpected = ask<int32_t>(*proxy, 1s, 1.5);
+  ASSERT_FALSE(unexpected);
+  EXPECT_EQ(unexpected.error().category(), caf::atom("system"));
+  EXPECT_EQ(unexpected.error().code(),
+            static_cast<uint8_t>(caf::sec::unexpected_message));
+  // Something that cannot be marshalled (an actor handle) is refused here.
+  auto refused = ask<int32_t>(*proxy, 1s, *proxy);
+  ASSERT_FALSE(refused);
+  EXPECT_TRUE(is(refused.error(), ec::invalid_parameter)) << render(refused.error());
+  // An answer that never comes: the layer's deadline (2 s here).
+  auto never = ask<int32_t>(*proxy, 3s, atom::done_v);
+  ASSERT_FALSE(never);
+  EXPECT_TRUE(is(never.error(), ec::timeout)) << render(never.error());
+  EXPECT_EQ(stats(0).request_timeouts, 1u);
+  // Oversized: over max_message after marshalling.
+  auto big = ask<std::string>(*proxy, 1s, std::string(70 * 1024, 'b'));
+  ASSERT_FALSE(big);
+  EXPECT_TRUE(is(big.error(), ec::packet_too_large)) << render(big.error());
+}
+
+TEST_F(asl_test, binding_to_a_missing_apo_or_module_fails) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto ref = add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto nowhere = bind(0, apo_ref{0x77, 1, "x", "t"});
+  ASSERT_FALSE(nowhere);
+  EXPECT_TRUE(is(nowhere.error(), ec::no_route)) << render(nowhere.error());
+  auto missing = bind(0, bind_request{query_by::name, "ghost", 200, false});
+  ASSERT_FALSE(missing);
+  EXPECT_TRUE(is(missing.error(), ec::not_found)) << render(missing.error());
+  // A stale number: the proxy ends at once (the far end says it is gone).
+  auto stale = ref;
+  stale.apo += 1000;
+  auto proxy = bind(0, stale);
+  ASSERT_TRUE(proxy);
+  auto log = std::make_shared<seen>();
+  auto watcher = spawn_recorder(log);
+  caf::anon_send(watcher, atom::add_v, *proxy);
+  run();
+  ASSERT_EQ(log->downs.size(), 1u);
+  EXPECT_TRUE(is(log->downs[0].reason, ec::apo_gone)) << render(log->downs[0].reason);
+  auto after = ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{2});
+  ASSERT_FALSE(after);
+}
+
+TEST_F(asl_test, binding_to_a_local_apo_yields_the_apo_itself) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto apo = spawn_calculator(std::make_shared<seen>());
+  auto ref = add(0, "calc", "t", apo);
+  auto direct = bind(0, ref);
+  ASSERT_TRUE(direct);
+  EXPECT_EQ(*direct, apo);
+  auto by_name = bind(0, bind_request{query_by::name, "calc", 100, false});
+  ASSERT_TRUE(by_name);
+  EXPECT_EQ(*by_name, apo);
+}
+
+// -- monitoring -----------------------------------------------------------------------
+
+TEST_F(asl_test, a_monitor_of_a_proxy_learns_when_the_remote_apo_exits) {
+  // Through an intermediate module: 0 - 1 - 2.
+  build(3, {{{0, 1}, "ethernet"}, {{1, 2}, "ethernet"}});
+  auto apo = spawn_calculator(std::make_shared<seen>());
+  auto ref = add(2, "calc", "t", apo);
+  auto proxy = bind(0, ref);
+  ASSERT_TRUE(proxy);
+  auto log = std::make_shared<seen>();
+  auto watcher = spawn_recorder(log);
+  caf::anon_send(watcher, atom::add_v, *proxy);
+  run();
+  EXPECT_TRUE(log->downs.empty());
+  caf::anon_send_exit(apo, caf::exit_reason::user_shutdown);
+  run();
+  ASSERT_EQ(log->downs.size(), 1u);
+  EXPECT_EQ(log->downs[0].source, proxy->address());
+  EXPECT_EQ(log->downs[0].reason, caf::exit_reason::user_shutdown);
+  auto after = ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{2});
+  EXPECT_FALSE(after);
+}
+
+TEST_F(asl_test, a_monitor_of_a_proxy_learns_when_the_remote_module_dies) {
+  build(3, {{{0, 1}, "ethernet"}, {{1, 2}, "can2.0"}});
+  add(2, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false});
+  ASSERT_TRUE(proxy);
+  auto log = std::make_shared<seen>();
+  auto watcher = spawn_recorder(log);
+  caf::anon_send(watcher, atom::add_v, *proxy);
+  run();
+  net->kill(2);
+  // Hellos stop; module 1 loses the neighbour, retracts the route; module 0
+  // waits the grace period (300 ms here) before giving up.
+  net->advance(1500ms);
+  ASSERT_EQ(log->downs.size(), 1u);
+  EXPECT_TRUE(is(log->downs[0].reason, ec::no_route)) << render(log->downs[0].reason);
+  auto after = ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{2});
+  ASSERT_FALSE(after);
+  EXPECT_EQ(stats(0).proxies_ended, 1u);
+}
+
+TEST_F(asl_test, a_pending_request_fails_when_the_module_becomes_unreachable) {
+  build(2, {{{0, 1}, "ethernet"}});
+  add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false});
+  ASSERT_TRUE(proxy);
+  net->silence(0);
+  // The request is lost on the silent link; the route goes away; the
+  // requester hears no_route well before the 2 s request deadline.
+  auto res = ask<int32_t>(*proxy, 1500ms, int32_t{1}, int32_t{2});
+  ASSERT_FALSE(res);
+  EXPECT_TRUE(is(res.error(), ec::no_route)) << render(res.error());
+  net->restore(0);
+}
+
+TEST_F(asl_test, a_rebinding_proxy_resumes_when_the_module_returns) {
+  build(2, {{{0, 1}, "ethernet"}});
+  add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, true});
+  ASSERT_TRUE(proxy);
+  ASSERT_TRUE(ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{1}));
+  net->kill(1);
+  net->advance(1500ms);
+  auto gone = ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{2});
+  ASSERT_FALSE(gone);
+  EXPECT_TRUE(is(gone.error(), ec::apo_gone)) << render(gone.error());
+  // The module comes back with a new calculator under the same name.
+  net->start_module(1);
+  net->advance(1s);
+  add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  net->advance(1s); // the next rebind search finds it
+  auto back = ask<int32_t>(*proxy, 1s, int32_t{20}, int32_t{22});
+  ASSERT_TRUE(back) << render(back.error());
+  EXPECT_EQ(*back, 42);
+}
+
+// -- topics ---------------------------------------------------------------------------
+
+TEST_F(asl_test, topics_reach_subscribers_on_every_module_late_joiners_included) {
+  // Publisher on 4; subscribers on 0 and 2; a late joiner on 3.
+  build(5, {{{0, 1}, "ethernet"}, {{1, 2}, "can2.0"}, {{2, 3, 4}, "can2.0"}});
+  auto s0 = std::make_shared<seen>(), s2 = std::make_shared<seen>();
+  auto sub0 = spawn_recorder(s0), sub2 = spawn_recorder(s2);
+  ASSERT_TRUE(call<>(asl(0), atom::subscribe_v, std::string{"range"}, sub0));
+  ASSERT_TRUE(call<>(asl(2), atom::subscribe_v, std::string{"range"}, sub2));
+  net->advance(500ms);
+  for (int32_t v = 1; v <= 3; ++v) {
+    caf::anon_send(asl(4), atom::publish_v, std::string{"range"},
+                   caf::make_message(v * 100));
+    net->advance(100ms);
+  }
+  EXPECT_EQ(s0->numbers, (std::vector<int32_t>{100, 200, 300}));
+  EXPECT_EQ(s2->numbers, (std::vector<int32_t>{100, 200, 300}));
+  // A late joiner gets the last value at once, then the next ones.
+  auto s3 = std::make_shared<seen>();
+  auto sub3 = spawn_recorder(s3);
+  ASSERT_TRUE(call<>(asl(3), atom::subscribe_v, std::string{"range"}, sub3));
+  net->advance(100ms);
+  EXPECT_EQ(s3->numbers, std::vector<int32_t>{300});
+  caf::anon_send(asl(4), atom::publish_v, std::string{"range"},
+                 caf::make_message(int32_t{400}));
+  net->advance(100ms);
+  EXPECT_EQ(s3->numbers, (std::vector<int32_t>{300, 400}))
+    << "received " << stats(3).publications_received << ", sent "
+    << stats(4).publications_sent << ", lost " << stats(3).publications_lost;
+  EXPECT_EQ(s0->numbers.back(), 400);
+  EXPECT_EQ(stats(0).publications_lost, 0u);
+}
+
+TEST_F(asl_test, a_dead_subscriber_stops_the_stream_to_its_module) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto s0 = std::make_shared<seen>();
+  auto sub0 = spawn_recorder(s0);
+  ASSERT_TRUE(call<>(asl(0), atom::subscribe_v, std::string{"vision"}, sub0));
+  net->advance(300ms);
+  caf::anon_send(asl(1), atom::publish_v, std::string{"vision"},
+                 caf::make_message(std::string(100, 'v')));
+  net->advance(100ms);
+  ASSERT_EQ(s0->texts.size(), 1u);
+  caf::anon_send_exit(sub0, caf::exit_reason::user_shutdown);
+  net->advance(100ms);
+  auto sent = stats(1).publications_sent;
+  caf::anon_send(asl(1), atom::publish_v, std::string{"vision"},
+                 caf::make_message(std::string(100, 'w')));
+  net->advance(100ms);
+  EXPECT_EQ(stats(1).publications_sent, sent); // unsubscribed: nothing sent
+}
+
+TEST_F(asl_test, subscribers_follow_a_publisher_that_moves) {
+  build(3, {{{0, 1}, "ethernet"}, {{1, 2}, "ethernet"}});
+  auto s0 = std::make_shared<seen>();
+  auto sub0 = spawn_recorder(s0);
+  ASSERT_TRUE(call<>(asl(0), atom::subscribe_v, std::string{"pose"}, sub0));
+  net->advance(300ms);
+  caf::anon_send(asl(2), atom::publish_v, std::string{"pose"},
+                 caf::make_message(int32_t{1}));
+  net->advance(100ms);
+  net->kill(2);
+  net->advance(1s);
+  // The publisher comes back on module 1: it advertises, the subscriber's
+  // module subscribes at once.
+  caf::anon_send(asl(1), atom::publish_v, std::string{"pose"},
+                 caf::make_message(int32_t{2}));
+  net->advance(100ms);
+  caf::anon_send(asl(1), atom::publish_v, std::string{"pose"},
+                 caf::make_message(int32_t{3}));
+  net->advance(100ms);
+  EXPECT_EQ(s0->numbers, (std::vector<int32_t>{1, 2, 3}));
+}
+
+// -- bad input ------------------------------------------------------------------------
+
+namespace {
+
+using raw_log = std::vector<packet_delivered>;
+
+} // namespace
+
+TEST_F(asl_test, bad_input_is_dropped_and_counted_or_answered_with_an_error) {
+  // Module 0 runs no ASL: the test speaks protocol 1 by hand from there.
+  cfg.limits.max_total = 4096;
+  net = std::make_unique<sim_network>(*this, test_prefix());
+  net->add_module(id_of(0));
+  net->add_module(id_of(1));
+  net->connect({0, 1}, "ethernet");
+  net->on_start = [this](size_t i, sim_network::module& m) {
+    if (i == 1)
+      m.apps = caf::actor_cast<caf::actor>(
+        track(spawn_app_support(sys(), m.agent, cfg)));
+  };
+  net->start();
+  net->advance(2s);
+  auto ref = add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto got = std::make_shared<raw_log>();
+  auto rcv = track(sys().spawn(
+    [got](network_receiver_actor::pointer) -> network_receiver_actor::behavior_type {
+      return {[got](packet_delivered& x) { got->push_back(std::move(x)); }};
+    }));
+  caf::anon_send(net->at(0).agent, atom::subscribe_v, asl_protocol, rcv);
+  auto send_raw = [&](byte_buffer bytes) {
+    caf::anon_send(net->at(0).agent,
+                   send_packet{id_of(1), asl_protocol, prio_normal, bytes});
+    run();
+  };
+  auto enc = [](const asl_message& m) {
+    byte_buffer out;
+    encode(m, out);
+    return out;
+  };
+  auto last_response = [&]() -> asl_response {
+    if (got->empty())
+      return {};
+    auto m = decode_asl(got->back().payload.data(), got->back().payload.size());
+    if (!m || !std::holds_alternative<asl_response>(*m))
+      return {};
+    return std::get<asl_response>(*m);
+  };
+  // Garbage: counted, nothing answered.
+  send_raw({0x01});
+  send_raw({0x07, 0x03, 0xFF});
+  EXPECT_EQ(stats(1).rx_malformed, 2u);
+  EXPECT_TRUE(got->empty());
+  // A payload naming a type this module does not know: ec::unknown_type.
+  byte_buffer unknown{apo_format_version, 1, 8};
+  for (char c : std::string{"foo::bar"})
+    unknown.push_back(static_cast<uint8_t>(c));
+  unknown.push_back(0);
+  send_raw(enc(asl_request{77, ref.apo, unknown}));
+  auto r = last_response();
+  EXPECT_EQ(r.request_id, 77u);
+  EXPECT_FALSE(r.ok);
+  EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::unknown_type));
+  EXPECT_NE(r.error.context.find("foo::bar"), std::string::npos);
+  EXPECT_EQ(stats(1).rx_unknown_type, 1u);
+  // A payload that does not decode: invalid_parameter.
+  send_raw(enc(asl_request{78, ref.apo, byte_buffer{apo_format_version, 1}}));
+  r = last_response();
+  EXPECT_EQ(r.request_id, 78u);
+  EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::invalid_parameter));
+  // An APO that is not there: apo_gone.
+  auto good = marshal(sys(), caf::make_message(int32_t{1}, int32_t{2}));
+  ASSERT_TRUE(good);
+  send_raw(enc(asl_request{79, ref.apo + 1, *good}));
+  r = last_response();
+  EXPECT_EQ(r.request_id, 79u);
+  EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::apo_gone));
+  // The same request to the right APO is served.
+  send_raw(enc(asl_request{80, ref.apo, *good}));
+  r = last_response();
+  EXPECT_EQ(r.request_id, 80u);
+  ASSERT_TRUE(r.ok);
+  auto sum = unmarshal(sys(), r.payload.data(), r.payload.size());
+  ASSERT_TRUE(sum);
+  EXPECT_EQ(sum->get_as<int32_t>(0), 3);
+  // A response to a request nobody made: counted and dropped.
+  send_raw(enc(asl_response{12345, true, *good, {}}));
+  EXPECT_EQ(stats(1).rx_unexpected_response, 1u);
+  // An oversized payload is refused by the unmarshal limits.
+  byte_buffer huge(8192, 0);
+  huge[0] = apo_format_version;
+  send_raw(enc(asl_request{81, ref.apo, huge}));
+  r = last_response();
+  EXPECT_EQ(r.request_id, 81u);
+  EXPECT_FALSE(r.ok);
+  // The module still serves.
+  auto proxy_ok = stats(1).requests_served;
+  EXPECT_EQ(proxy_ok, 1u);
+}
