@@ -1,0 +1,220 @@
+// herm-example-calculator: a remote calculator in two processes, the
+// smallest complete use of HERM's Application Support Layer.
+//
+//   herm-example-calculator serve        (module 0x20, UDP port 47100)
+//   herm-example-calculator call         (module 0x21, UDP port 47101)
+//
+// The serving module registers an application object (APO) named
+// "calculator"; the calling module binds to it by name and sends it
+// requests as if it were a local actor. The modules talk over UDP on
+// loopback here; over CAN, IEEE 1394 or a serial line the code is the same.
+// docs/user-guide quotes the regions marked "// [name]" ... "// [name-end]".
+
+#include <chrono>
+#include <csignal>
+#include <iostream>
+#include <string>
+#include <thread>
+
+#include <CLI/CLI.hpp>
+
+#include "caf/actor_system.hpp"
+#include "caf/actor_system_config.hpp"
+#include "caf/event_based_actor.hpp"
+#include "caf/scoped_actor.hpp"
+
+#include "actors/module.hpp"
+#include "actors/runtime/error.hpp"
+#include "actors/runtime/system.hpp"
+#include "actors/runtime/type_ids.hpp"
+
+using namespace std::chrono_literals;
+
+// [type]
+// A message type of our own: a plain struct with an inspect overload. That is
+// all it needs to travel between modules (HERM marshals it field by field).
+struct calc_request {
+  int32_t a = 0;
+  int32_t b = 0;
+  std::string op; // "+", "-", "*" or "/"
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, calc_request& x) {
+  return f(caf::meta::type_name("calc_request"), x.a, x.b, x.op);
+}
+
+// Our own type-ID block starts where HERM's ends. Both modules register it:
+// the type's name ("calc_request") identifies it on the wire.
+CAF_BEGIN_TYPE_ID_BLOCK(calculator_example, caf::id_block::herm::end)
+  CAF_ADD_TYPE_ID(calculator_example, (calc_request))
+CAF_END_TYPE_ID_BLOCK(calculator_example)
+// [type-end]
+
+namespace {
+
+volatile std::sig_atomic_t stop_requested = 0;
+
+// [apo]
+// The APO is an ordinary CAF actor. What it returns goes back to the caller;
+// an error is a value too and reaches the caller as a caf::error.
+caf::behavior calculator(caf::event_based_actor*) {
+  return {
+    [](const calc_request& r) -> caf::result<int32_t> {
+      if (r.op == "+")
+        return r.a + r.b;
+      if (r.op == "-")
+        return r.a - r.b;
+      if (r.op == "*")
+        return r.a * r.b;
+      if (r.op == "/" && r.b != 0)
+        return r.a / r.b;
+      return herm::make_error(herm::ec::invalid_parameter,
+                              "cannot compute " + std::to_string(r.a) + " "
+                                + r.op + " " + std::to_string(r.b));
+    },
+  };
+}
+// [apo-end]
+
+/// Starts this process's module: one UDP interface on loopback.
+caf::expected<herm::module_handles> start(caf::actor_system& sys,
+                                          herm::module_id id, uint16_t port,
+                                          const std::string& peers) {
+  herm::module_config mc;
+  mc.routing.id = id;
+  mc.routing.hello_interval = 100ms; // converge fast (default: 1 s)
+  mc.devices.push_back({"eth0", "udp", "127.0.0.1:" + std::to_string(port),
+                        {{"peers", peers}}});
+  return herm::start_module(sys, mc);
+}
+
+int serve(caf::actor_system& sys, const herm::module_handles& m, int seconds) {
+  caf::scoped_actor self{sys};
+  // [register]
+  // Registering makes the actor discoverable by name and by type from every
+  // module; it stays registered until it exits.
+  auto apo = sys.spawn(calculator);
+  caf::error err;
+  self->request(m.apps, 5s, herm::atom::add_v, std::string{"calculator"},
+                std::string{"example.calculator"}, apo)
+    .receive(
+      [](herm::apo_ref& ref) {
+        std::cout << "registered '" << ref.name << "' as APO " << ref.apo
+                  << std::endl;
+      },
+      [&](caf::error& e) { err = e; });
+  // [register-end]
+  if (err) {
+    std::cout << "error " << herm::render(err) << std::endl;
+    self->send_exit(apo, caf::exit_reason::user_shutdown);
+    return 1;
+  }
+  auto until = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+  while (stop_requested == 0
+         && (seconds <= 0 || std::chrono::steady_clock::now() < until))
+    std::this_thread::sleep_for(50ms);
+  self->send_exit(apo, caf::exit_reason::user_shutdown);
+  return 0;
+}
+
+// [bind]
+// Finds the APO named "calculator" anywhere in the network and returns a
+// proxy: a local caf::actor that stands for it. Right after start-up the
+// routes are still converging, so not_found and no_route mean "try again".
+caf::actor bind_calculator(caf::scoped_actor& self, herm::app_support_actor asl) {
+  auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (std::chrono::steady_clock::now() < deadline) {
+    caf::actor proxy;
+    caf::error err;
+    self->request(asl, 5s, herm::atom::bind_v,
+                  herm::bind_request{herm::query_by::name, "calculator", 2000,
+                                     false})
+      .receive([&](caf::actor& p) { proxy = p; },
+               [&](caf::error& e) { err = e; });
+    if (proxy)
+      return proxy;
+    if (!herm::is(err, herm::ec::not_found) && !herm::is(err, herm::ec::no_route)) {
+      std::cout << "error " << herm::render(err) << std::endl;
+      break;
+    }
+    std::this_thread::sleep_for(200ms);
+  }
+  return {};
+}
+// [bind-end]
+
+int call(caf::actor_system& sys, const herm::module_handles& m) {
+  caf::scoped_actor self{sys};
+  auto proxy = bind_calculator(self, m.apps);
+  if (!proxy)
+    return 1;
+  // A monitor on the proxy learns when the calculator exits or its module
+  // becomes unreachable, like a monitor on any actor.
+  self->monitor(proxy);
+  int failures = 0;
+  for (auto& r : {calc_request{40, 2, "+"}, calc_request{6, 7, "*"},
+                  calc_request{100, 58, "-"}, calc_request{84, 2, "/"}}) {
+    // The request crosses the network; the reply comes back here.
+    self->request(proxy, 5s, r).receive(
+      [&](int32_t result) {
+        std::cout << "result " << r.a << " " << r.op << " " << r.b << " = "
+                  << result << std::endl;
+      },
+      [&](caf::error& err) {
+        std::cout << "error " << herm::render(err) << std::endl;
+        ++failures;
+      });
+  }
+  // Errors come back as values: dividing by zero is refused remotely.
+  self->request(proxy, 5s, calc_request{7, 0, "/"}).receive(
+    [&](int32_t) { ++failures; },
+    [&](caf::error& err) {
+      std::cout << "refused 7 / 0: " << herm::render(err) << std::endl;
+    });
+  // Had the calculator gone away meanwhile, its down message would be here.
+  self->receive(
+    [&](caf::down_msg& down) {
+      std::cout << "calculator gone: " << herm::render(down.reason) << std::endl;
+    },
+    caf::after(0ms) >> [] {});
+  return failures == 0 ? 0 : 1;
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"herm-example-calculator: a remote calculator over HERM"};
+  app.fallthrough();
+  uint16_t port = 0;
+  std::string peer;
+  int seconds = 0;
+  app.add_option("--port", port, "local UDP port (serve: 47100, call: 47101)");
+  app.add_option("--peer", peer, "the other module's UDP address(es), comma-separated");
+  auto* serve_cmd = app.add_subcommand("serve", "register the calculator APO");
+  serve_cmd->add_option("--seconds", seconds, "stop after N seconds (0: on SIGINT)");
+  app.add_subcommand("call", "bind to the calculator and send it requests");
+  app.require_subcommand(1);
+  CLI11_PARSE(app, argc, argv);
+  bool serving = serve_cmd->parsed();
+  if (port == 0)
+    port = serving ? 47100 : 47101;
+  if (peer.empty())
+    peer = serving ? "127.0.0.1:47101" : "127.0.0.1:47100";
+  std::signal(SIGTERM, [](int) { stop_requested = 1; });
+  std::signal(SIGINT, [](int) { stop_requested = 1; });
+
+  // HERM's types, then ours.
+  caf::actor_system_config cfg;
+  herm::configure(cfg);
+  cfg.add_message_types<caf::id_block::calculator_example>();
+  caf::actor_system sys{cfg};
+  auto m = start(sys, serving ? 0x20 : 0x21, port, peer);
+  if (!m) {
+    std::cout << "error " << herm::render(m.error()) << std::endl;
+    return 1;
+  }
+  auto status = serving ? serve(sys, *m, seconds) : call(sys, *m);
+  herm::stop_module(*m);
+  return status;
+}
