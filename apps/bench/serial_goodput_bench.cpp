@@ -1,7 +1,7 @@
 // Goodput of the "serial" link kind (RS232C) through HERM's port stack.
 //
 // Two serial drivers sit on the two ends of the paced null-modem cable of
-// tests/support/null_modem.hpp (pseudo-terminals, a relay that clocks bytes
+// channels/testing/null_modem.hpp (pseudo-terminals, a relay that clocks bytes
 // out at exactly baud / 10 bytes/s for 8N1). The sender pushes packets
 // through make_port(driver, reassembly_limits{}) (a fragmenting_port over a
 // frame_port: 1 header byte per 32-byte frame, CRC-32 per fragmented
@@ -38,7 +38,7 @@
 #include "actors/runtime/error.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/port.hpp"
-#include "tests/support/null_modem.hpp"
+#include "channels/testing/null_modem.hpp"
 
 using namespace herm;
 

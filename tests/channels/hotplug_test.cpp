@@ -14,7 +14,7 @@
 #include "actors/runtime/system.hpp"
 #include "actors/runtime/type_ids.hpp"
 #include "channels/io_manager.hpp"
-#include "tests/support/null_modem.hpp"
+#include "channels/testing/null_modem.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;

@@ -6,7 +6,7 @@
 //    checked against an independent reference decoder;
 //  - serial_settings: option resolution without a device;
 //  - serial_driver: real drivers on pseudo-terminals, connected by the paced
-//    null-modem relay of tests/support/null_modem.hpp (or, for the exact
+//    null-modem relay of channels/testing/null_modem.hpp (or, for the exact
 //    bytes on the wire, on one raw pty).
 //
 // Every wait is bounded (wait_limit); no test asserts speed. Each test
@@ -40,7 +40,7 @@
 #include "channels/drivers/serial_framing.hpp"
 #include "channels/drivers/serial_settings.hpp"
 #include "channels/link_driver.hpp"
-#include "tests/support/null_modem.hpp"
+#include "channels/testing/null_modem.hpp"
 
 namespace herm {
 namespace {

@@ -1,0 +1,2 @@
+// Placeholder: implemented in the config helper's change.
+#include "actors/config.hpp"

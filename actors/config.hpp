@@ -1,0 +1,77 @@
+#pragma once
+
+// A module's configuration file (YAML), as hermd reads it and as users who
+// embed HERM can read it too: identity and addressing, channels, APOs to
+// load, logging, scheduler and the local control endpoint. The format is
+// documented in docs/user-guide.md ("Configuration reference").
+//
+// Pure: parsing does no I/O but reading the file, opens no device and starts
+// no actor. Every error names the file, the line and the field and says what
+// was expected: "robot.yaml:12: channels[1].mtu: expected an integer in
+// [1, 65535], got 'big'". A config that parses is complete: hermd starts
+// everything it names or nothing.
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "caf/expected.hpp"
+
+#include "actors/module.hpp"
+
+namespace herm {
+
+/// One APO that hermd loads at start: an instance of a registered APO kind
+/// (see apo_kinds in apps/hermd), registered under `name` and `type`.
+struct apo_config {
+  std::string name;
+  /// The factory that makes it ("collector", "srf04_batcher", ...).
+  std::string kind;
+  /// The interface it speaks; defaults to "herm.<kind>".
+  std::string type;
+  /// Kind-specific options, as text (numbers as written, lists comma-joined).
+  std::map<std::string, std::string> options;
+  /// Line of the entry in the file, for errors found later (0: unknown).
+  int line = 0;
+};
+
+/// Everything a config file says.
+struct file_config {
+  /// Module name for logs and the default control socket ("main").
+  std::string name;
+  /// Identity, timers, channels (module.devices: one per `channels` entry)
+  /// and the application layer's settings.
+  module_config module;
+  /// Line of each channel entry, parallel to module.devices.
+  std::vector<int> device_lines;
+  std::vector<apo_config> apos;
+  /// trace, debug, info, warn, error or off.
+  std::string log_level = "info";
+  /// text (human-readable, default) or json (one object per line).
+  std::string log_format = "text";
+  /// "sharing" (default) or "stealing"; see herm::configure.
+  std::string scheduler = "sharing";
+  /// Worker threads; 0: CAF's default (one per core).
+  size_t threads = 0;
+  /// Path of the local control socket; empty: none.
+  std::string control_socket;
+  /// The file it came from.
+  std::string path;
+};
+
+/// Parses `text` as a config file named `path` (for error messages).
+caf::expected<file_config> parse_config(const std::string& text,
+                                        const std::string& path);
+
+/// Reads and parses the file at `path`. A file that cannot be read is an
+/// error naming it and the reason.
+caf::expected<file_config> load_config(const std::string& path);
+
+/// The default control socket of a module named `name`:
+/// /run/herm/NAME.sock for root, else $XDG_RUNTIME_DIR/herm/NAME.sock, else
+/// /tmp/herm-UID/NAME.sock.
+std::string default_control_socket(const std::string& name);
+
+} // namespace herm

@@ -1,0 +1,2 @@
+// Placeholder: implemented in the control helper's change.
+#include "actors/control.hpp"

@@ -1,0 +1,70 @@
+#pragma once
+
+// The control service of a module: what hermctl talks to. Requests and
+// replies are JSON text (docs/protocol.md, "Control requests"); a request
+// that names another module ("module": "0x4E") is forwarded to that
+// module's control service through the Application Support Layer, so one
+// local endpoint reaches every module the routing can reach.
+
+#include <chrono>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+
+#include "caf/expected.hpp"
+#include "caf/fwd.hpp"
+#include "caf/replies_to.hpp"
+#include "caf/typed_actor.hpp"
+
+#include "actors/module.hpp"
+
+namespace herm {
+
+/// Name and type under which every module's control service is registered
+/// as an APO.
+constexpr const char* control_apo_name = "herm.control";
+constexpr const char* control_apo_type = "herm.control/1";
+
+/// One request (a JSON object with at least "cmd") in, one reply out:
+/// {"ok": true, "result": ...} or {"ok": false, "error": {"code": "no_route",
+/// "message": "..."}}. Never fails at the CAF level.
+using control_actor
+  = caf::typed_actor<caf::replies_to<std::string>::with<std::string>>;
+
+/// Spawns the control service of module `m` (named `module_name` in
+/// replies) and registers it in the module's application table.
+control_actor spawn_control(caf::actor_system& sys, const module_handles& m,
+                            std::string module_name);
+
+/// Commands a server answers on its own thread instead of the service
+/// (hermd's "reload"): the request text in, the reply text out. They may
+/// block.
+using local_commands
+  = std::map<std::string, std::function<std::string(const std::string&)>>;
+
+/// A Unix-domain stream socket at `path` (mode 0600, parent directory
+/// created 0700 if missing, a stale socket file replaced; a live one is an
+/// error): one JSON request per line, one JSON reply per line, any number
+/// of clients one after another. Stops, joins its thread and removes the
+/// socket file when destroyed.
+class control_server {
+public:
+  static caf::expected<std::unique_ptr<control_server>>
+  start(caf::actor_system& sys, control_actor service, std::string path,
+        local_commands locals = {});
+  virtual ~control_server();
+  const std::string& path() const;
+
+protected:
+  control_server() = default;
+};
+
+/// Client side (hermctl, tests): connects to `path`, sends one request line
+/// and reads one reply line. Errors name the path: "no module listening at
+/// PATH (is hermd running?)", timeouts.
+caf::expected<std::string> control_call(const std::string& path,
+                                        const std::string& request,
+                                        std::chrono::milliseconds timeout);
+
+} // namespace herm
