@@ -15,7 +15,8 @@ caf::expected<module_handles> start_module(caf::actor_system& sys,
   m.io = spawn_io_manager(sys);
   caf::scoped_actor self{sys};
   caf::error err;
-  for (auto& dev : cfg.devices) {
+  for (size_t i = 0; i < cfg.devices.size(); ++i) {
+    auto& dev = cfg.devices[i];
     self->request(m.io, timeout, atom::add_v, dev)
       .receive([](device_info&) {}, [&](caf::error& e) { err = e; });
     if (!err)
@@ -25,6 +26,14 @@ caf::expected<module_handles> start_module(caf::actor_system& sys,
                  [&](caf::error& e) { err = e; });
     if (err) {
       self->send_exit(m.io, caf::exit_reason::user_shutdown);
+      if (i < cfg.device_origins.size() && !cfg.device_origins[i].empty())
+      {
+        auto& ctx = err.context();
+        auto what = ctx.match_elements<std::string>() ? ctx.get_as<std::string>(0)
+                                                      : caf::to_string(ctx);
+        return caf::error{err.code(), err.category(),
+                          caf::make_message(cfg.device_origins[i] + ": " + what)};
+      }
       return err;
     }
   }

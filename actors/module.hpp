@@ -26,6 +26,9 @@ struct module_config {
   app_support_config apps;
   /// The interfaces; each gets one persistent channel to every peer ("*").
   std::vector<device_config> devices;
+  /// Optional, parallel to `devices`: where each was configured
+  /// ("robot.yaml:12"); prefixed to its start-up errors.
+  std::vector<std::string> device_origins;
 };
 
 /// A running module: its IO manager, routing agent and application support

@@ -76,12 +76,23 @@ caf::expected<device_actor> ensure_device(io_impl self,
   return slot.handle;
 }
 
+/// True for a channel its client keeps to itself (channel_request::local):
+/// listeners never hear of it.
+bool is_local(io_impl self, channel_id id) {
+  auto i = self->state.channels.find(id);
+  return i != self->state.channels.end() && i->second.request.local;
+}
+
 void notify(io_impl self, const channel_up& msg) {
+  if (is_local(self, msg.info.id))
+    return;
   for (auto& l : self->state.listeners)
     self->send(l, msg);
 }
 
 void notify(io_impl self, const channel_down& msg) {
+  if (is_local(self, msg.id))
+    return;
   for (auto& l : self->state.listeners)
     self->send(l, msg);
 }
@@ -261,6 +272,33 @@ io_manager_actor::behavior_type io_manager_fun(io_impl self,
       st.channels.erase(i);
       return caf::unit;
     },
+    [self](atom::close, std::string& device) -> caf::result<void> {
+      auto& st = self->state;
+      auto d = st.devices.find(device);
+      if (d == st.devices.end())
+        return make_error(ec::unknown_device, "no device named '" + device + "'");
+      for (auto i = st.channels.begin(); i != st.channels.end();) {
+        if (i->second.request.device != device) {
+          ++i;
+          continue;
+        }
+        if (i->second.handle) {
+          self->demonitor(i->second.handle.address());
+          self->send(i->second.handle, atom::close_v);
+          notify(self, channel_down{i->first,
+                                    make_error(ec::channel_closed, "closed"),
+                                    false});
+        }
+        i = st.channels.erase(i);
+      }
+      if (d->second.handle) {
+        self->demonitor(d->second.handle.address());
+        self->send_exit(d->second.handle, caf::exit_reason::user_shutdown);
+      }
+      st.running->erase(device);
+      st.devices.erase(d);
+      return caf::unit;
+    },
     [self](atom::get, atom::channels) -> std::vector<channel_entry> {
       std::vector<channel_entry> result;
       for (auto& kv : self->state.channels) {
@@ -286,7 +324,7 @@ io_manager_actor::behavior_type io_manager_fun(io_impl self,
     [self](atom::subscribe, io_listener_actor& listener) {
       self->monitor(listener);
       for (auto& kv : self->state.channels)
-        if (kv.second.handle)
+        if (kv.second.handle && !kv.second.request.local)
           self->send(listener, channel_up{kv.second.info, kv.second.handle});
       self->state.listeners.push_back(std::move(listener));
     },

@@ -77,6 +77,10 @@ using io_manager_actor = caf::typed_actor<
   caf::replies_to<atom::open, channel_request>::with<channel_actor,
                                                      channel_info>,
   caf::replies_to<atom::close, channel_id>::with<void>,
+  /// Removes a device: closes its channels (not re-created) and its driver,
+  /// and forgets its configuration, so that a device of that name can be
+  /// added anew (hermd's reload). Errors: ec::unknown_device.
+  caf::replies_to<atom::close, std::string>::with<void>,
   caf::replies_to<atom::get, atom::channels>::with<std::vector<channel_entry>>,
   caf::replies_to<atom::get, atom::devices>::with<std::vector<device_info>>,
   caf::replies_to<atom::get, channel_id>::with<channel_actor>,

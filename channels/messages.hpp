@@ -156,12 +156,16 @@ struct channel_request {
   std::string address = "*";
   /// Re-create the channel with backoff when its device fails.
   bool persistent = false;
+  /// A channel for its client's own use (an APO reading a sensor line): the
+  /// IO manager does not announce it to its listeners, so the routing agent
+  /// leaves it alone (no hellos, no routes over it).
+  bool local = false;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, channel_request& x) {
   return f(caf::meta::type_name("channel_request"), x.device, x.address,
-           x.persistent);
+           x.persistent, x.local);
 }
 
 /// What a channel says about itself.

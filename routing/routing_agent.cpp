@@ -1,6 +1,7 @@
 #include "routing/routing_agent.hpp"
 
 #include <algorithm>
+#include <memory>
 #include <deque>
 #include <map>
 #include <set>
@@ -67,6 +68,8 @@ struct agent_state {
   /// Hello intervals and quarter intervals since start.
   uint32_t ticks = 0;
   uint32_t quarters = 0;
+  /// Said goodbye: sends no more hellos.
+  bool leaving = false;
   byte_buffer buf;
 
   std::chrono::steady_clock::duration hold() const {
@@ -94,11 +97,12 @@ void send_all(agent_impl self, const byte_buffer& bytes,
                  write_packet{broadcast_addr, prio_control, bytes});
 }
 
-void send_hellos(agent_impl self) {
+/// Hellos on every channel; a goodbye (interval 0) when `leaving`.
+void send_hellos(agent_impl self, bool leaving = false) {
   auto& st = self->state;
+  auto interval = std::clamp<int64_t>(st.cfg.hello_interval.count(), 1, 0xFFFF);
   hello h{st.table.self(), st.alloc->instance(), st.hello_seqno++,
-          static_cast<uint16_t>(std::min<int64_t>(st.cfg.hello_interval.count(),
-                                                   0xFFFF))};
+          static_cast<uint16_t>(leaving ? 0 : interval)};
   st.buf.clear();
   encode(h, st.buf);
   send_all(self, st.buf);
@@ -295,6 +299,46 @@ void deliver(agent_impl self, const data_header& h, const byte_buffer& bytes) {
   self->send(i->second, std::move(msg));
 }
 
+/// Fills the outgoing half of a trace and hands it to the tracer.
+void trace_out(agent_impl self, packet_trace& t, const data_header& h,
+               const next_hop& nh) {
+  auto& st = self->state;
+  if (auto i = st.channels.find(nh.channel); i != st.channels.end()) {
+    t.out_link = i->second.info.profile.name;
+    t.out_mtu = i->second.info.profile.mtu;
+  }
+  if (auto n = st.neighbours.find(nh); n != st.neighbours.end())
+    t.next = n->second.id;
+  if (auto adv = st.table.advertisement(h.dst)) {
+    t.cost = adv->metrics[h.size_class];
+    for (auto code : adv->path[h.size_class]) {
+      if (!t.forwarding.empty())
+        t.forwarding += '-';
+      t.forwarding += to_string(code);
+    }
+  }
+  st.cfg.tracer(t);
+}
+
+packet_trace make_trace(agent_impl self, packet_trace::what_t what,
+                        const data_header& h, size_t bytes,
+                        channel_id in = 0) {
+  auto& st = self->state;
+  packet_trace t;
+  t.what = what;
+  t.self = st.table.self();
+  t.src = h.src;
+  t.dst = h.dst;
+  t.protocol = h.protocol;
+  t.size_class = h.size_class;
+  t.bytes = static_cast<uint32_t>(bytes);
+  if (auto i = st.channels.find(in); in != 0 && i != st.channels.end()) {
+    t.in_link = i->second.info.profile.name;
+    t.in_mtu = i->second.info.profile.mtu;
+  }
+  return t;
+}
+
 /// Puts an encoded data packet on the channel and neighbour of `nh`.
 void transmit(agent_impl self, const next_hop& nh, uint8_t priority,
               byte_buffer bytes) {
@@ -305,7 +349,8 @@ void transmit(agent_impl self, const next_hop& nh, uint8_t priority,
 }
 
 /// Passes on a packet for another module, one hop limit less.
-void forward(agent_impl self, const data_header& h, byte_buffer bytes) {
+void forward(agent_impl self, const data_header& h, byte_buffer bytes,
+             channel_id in) {
   auto& st = self->state;
   if (h.hop_limit <= 1) {
     ++st.stats.dropped_hop_limit;
@@ -318,6 +363,10 @@ void forward(agent_impl self, const data_header& h, byte_buffer bytes) {
   }
   set_hop_limit(bytes.data(), static_cast<uint8_t>(h.hop_limit - 1));
   ++st.stats.forwarded;
+  if (st.cfg.tracer) {
+    auto t = make_trace(self, packet_trace::forwarded, h, bytes.size(), in);
+    trace_out(self, t, h, *nh);
+  }
   transmit(self, *nh, h.priority, std::move(bytes));
 }
 
@@ -376,10 +425,13 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
   }
   if (st.cfg.observer)
     st.cfg.observer(st.table.self(), *h, bytes);
-  if (h->dst == st.table.self())
+  if (h->dst == st.table.self()) {
+    if (st.cfg.tracer)
+      st.cfg.tracer(make_trace(self, packet_trace::delivered, *h, bytes.size(), ch));
     deliver(self, *h, bytes);
-  else
-    forward(self, *h, std::move(bytes));
+  } else {
+    forward(self, *h, std::move(bytes), ch);
+  }
 }
 
 void on_hello(agent_impl self, channel_id ch, link_addr src,
@@ -395,6 +447,16 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
     return;
   auto now = self->clock().now();
   next_hop nh{ch, src};
+  if (h->interval_ms == 0) {
+    // A goodbye: the neighbour leaves now; its routes go at once.
+    auto i = st.neighbours.find(nh);
+    if (i != st.neighbours.end() && i->second.instance == h->instance) {
+      st.neighbours.erase(i);
+      ++st.stats.rx_goodbyes;
+      apply_change(self, st.table.remove_neighbour(nh));
+    }
+    return;
+  }
   auto [i, added] = st.neighbours.try_emplace(nh);
   auto& n = i->second;
   bool restarted = !added && n.instance != h->instance;
@@ -517,7 +579,7 @@ void tick(agent_impl self) {
   auto& st = self->state;
   auto now = self->clock().now();
   bool hello_due = st.quarters++ % 4 == 0;
-  if (hello_due)
+  if (hello_due && !st.leaving)
     send_hellos(self);
   // Neighbours silent for too long are gone.
   table_change change;
@@ -606,6 +668,10 @@ caf::error originate(agent_impl self, send_packet& msg) {
   }
   if (st.cfg.observer)
     st.cfg.observer(self_id, h, bytes);
+  if (st.cfg.tracer) {
+    auto t = make_trace(self, packet_trace::originated, h, bytes.size());
+    trace_out(self, t, h, *nh);
+  }
   transmit(self, *nh, h.priority, std::move(bytes));
   return caf::none;
 }
@@ -771,6 +837,36 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
     },
     [](link_event&) {
       // Hellos, not link events, decide who is a neighbour.
+    },
+    [self](atom::close) -> caf::result<void> {
+      // Goodbyes first, then one round trip per channel: a channel handles
+      // its mailbox in order, so when it answers, the goodbye is with its
+      // driver.
+      auto& st = self->state;
+      send_hellos(self, true);
+      st.leaving = true;
+      auto rp = self->make_response_promise<void>();
+      auto deliver = [](caf::typed_response_promise<void>& p) {
+        static_cast<caf::response_promise&>(p).deliver(caf::unit);
+      };
+      if (st.channels.empty()) {
+        deliver(rp);
+        return rp;
+      }
+      auto left = std::make_shared<size_t>(st.channels.size());
+      for (auto& kv : st.channels)
+        self->request(kv.second.handle, std::chrono::seconds(1), atom::get_v,
+                      atom::info_v)
+          .then(
+            [rp, left, deliver](channel_info&) mutable {
+              if (--*left == 0)
+                deliver(rp);
+            },
+            [rp, left, deliver](caf::error&) mutable {
+              if (--*left == 0)
+                deliver(rp);
+            });
+      return rp;
     },
     [self](atom::tick) { tick(self); },
     [self](atom::flush) { flush_changes(self); },

@@ -137,6 +137,8 @@ struct routing_stats {
   uint64_t rx_malformed = 0;
   uint64_t rx_unknown_neighbour = 0;
   uint64_t rx_refused_routes = 0;
+  /// Neighbours that said goodbye (and were dropped at once).
+  uint64_t rx_goodbyes = 0;
   uint64_t tx_hellos = 0;
   uint64_t tx_updates = 0;
   uint64_t tx_update_entries = 0;
@@ -151,7 +153,7 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.assigned, x.renumberings, x.reachable, x.delivered, x.forwarded, x.originated,
            x.dropped_no_route, x.dropped_hop_limit, x.dropped_no_receiver,
            x.broadcasts_originated, x.broadcasts_relayed, x.dropped_duplicate,
-           x.rx_malformed, x.rx_unknown_neighbour, x.rx_refused_routes,
+           x.rx_malformed, x.rx_unknown_neighbour, x.rx_refused_routes, x.rx_goodbyes,
            x.tx_hellos, x.tx_updates, x.tx_update_entries, x.tx_claims,
            x.tx_conflicts, x.tx_seqno_requests);
 }
@@ -178,6 +180,11 @@ using routing_agent_actor = caf::typed_actor<
   caf::replies_to<atom::get, atom::routes>::with<std::vector<route_info>>,
   caf::replies_to<atom::get, atom::neighbors>::with<std::vector<neighbour_info>>,
   caf::replies_to<atom::get, atom::stats>::with<routing_stats>,
+  /// Leaves the network (a clean shutdown): sends a goodbye on every
+  /// channel, so that neighbours drop this module's routes at once instead
+  /// of after 1.5 silent hello intervals, and stops sending hellos. Replies
+  /// once every channel has handed its goodbye to its driver.
+  caf::replies_to<atom::close>::with<void>,
   // -- from the IO manager and the channels -----------------------------------
   caf::reacts_to<channel_up>, caf::reacts_to<channel_down>,
   caf::reacts_to<packet_received>, caf::reacts_to<link_event>,
@@ -185,6 +192,33 @@ using routing_agent_actor = caf::typed_actor<
   caf::reacts_to<atom::tick>,
   /// Sends the triggered updates collected while processing a burst.
   caf::reacts_to<atom::flush>>;
+
+/// One unicast data packet as a module handled it, for logs and traces
+/// (hermd's debug log, the testbed's trace). Not a message: a plain value
+/// handed to `routing_config::tracer`.
+struct packet_trace {
+  enum what_t : uint8_t { originated, forwarded, delivered };
+  what_t what = originated;
+  module_id self = no_module;
+  module_id src = no_module;
+  module_id dst = no_module;
+  uint8_t protocol = 0;
+  uint8_t size_class = 0;
+  /// The whole network packet (header and payload), bytes.
+  uint32_t bytes = 0;
+  /// Link profile name and MTU of the channel it came on (forwarded,
+  /// delivered) and leaves on (originated, forwarded).
+  std::string in_link;
+  uint32_t in_mtu = 0;
+  std::string out_link;
+  uint32_t out_mtu = 0;
+  /// The next hop's module id (originated, forwarded).
+  module_id next = no_module;
+  /// The selected route's cost to dst in the packet's class, and its
+  /// forwarding list ("Ethernet-CAN2.0"), when leaving.
+  uint32_t cost = 0;
+  std::string forwarding;
+};
 
 /// Timers and identity of one agent.
 struct routing_config {
@@ -217,6 +251,10 @@ struct routing_config {
   /// or forwarded), with the module's id; used by packet-path checkers.
   std::function<void(module_id self, const data_header&, const byte_buffer&)>
     observer;
+  /// Called for every unicast data packet this module originates, forwards
+  /// or delivers (see packet_trace); runs in the agent's thread, must not
+  /// block. Costs nothing when empty.
+  std::function<void(const packet_trace&)> tracer;
 };
 
 /// Spawns the agent and subscribes it to `io`'s channels.

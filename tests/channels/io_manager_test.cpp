@@ -391,3 +391,59 @@ TEST_F(nil_test, a_subscriber_that_exits_is_forgotten) {
   auto st = stats(b.ch);
   EXPECT_EQ(st.rx_packets, 1u);
 }
+
+TEST_F(nil_test, removing_a_device_closes_its_channels_and_frees_its_name) {
+  auto a = make_module(1, "ethernet", true);
+  auto [probe, log] = spawn_probe();
+  subscribe(a.ch, probe);
+  auto res = call<>(a.io, atom::close_v, std::string{"lan"});
+  ASSERT_TRUE(res) << render(res.error());
+  ASSERT_EQ(log->monitor_downs.size(), 1u);
+  EXPECT_TRUE(is(log->monitor_downs[0].reason, ec::channel_closed));
+  auto table = call<std::vector<channel_entry>>(a.io, atom::get_v, atom::channels_v);
+  ASSERT_TRUE(table);
+  EXPECT_TRUE(std::get<0>(*table).empty()) << "a persistent channel came back";
+  auto devices = call<std::vector<device_info>>(a.io, atom::get_v, atom::devices_v);
+  ASSERT_TRUE(devices);
+  EXPECT_TRUE(std::get<0>(*devices).empty());
+  // The name is free: the same device can be added again, with new options.
+  device_config cfg{"lan", "inproc", segment_name(),
+                    {{"station", "1"}, {"profile", "can2.0"}}};
+  auto added = call<device_info>(a.io, atom::add_v, cfg);
+  ASSERT_TRUE(added) << render(added.error());
+  auto opened = call<channel_actor, channel_info>(a.io, atom::open_v,
+                                                  channel_request{"lan", "*", true});
+  ASSERT_TRUE(opened) << render(opened.error());
+  EXPECT_EQ(std::get<1>(*opened).profile.mtu, 8u);
+  auto again = call<>(a.io, atom::close_v, std::string{"nope"});
+  ASSERT_FALSE(again);
+  EXPECT_TRUE(is(again.error(), ec::unknown_device));
+}
+
+// An APO's own channel (a sensor line) works like any other, but listeners
+// (the routing agent) never hear of it.
+TEST_F(nil_test, a_local_channel_is_not_announced_to_listeners) {
+  auto a = make_module(1);
+  auto b = make_module(2);
+  auto [probe, log] = spawn_probe();
+  caf::anon_send(a.io, atom::subscribe_v, caf::actor_cast<io_listener_actor>(probe));
+  run();
+  ASSERT_EQ(log->ups.size(), 1u); // the ordinary channel
+  device_config sensor{"sensor", "inproc", segment_name(),
+                       {{"station", "3"}, {"profile", "rs232c"}}};
+  ASSERT_TRUE(call<device_info>(a.io, atom::add_v, sensor));
+  auto opened = call<channel_actor, channel_info>(
+    a.io, atom::open_v, channel_request{"sensor", "*", false, true});
+  ASSERT_TRUE(opened) << render(opened.error());
+  run();
+  EXPECT_EQ(log->ups.size(), 1u);
+  auto [reader, rlog] = spawn_probe();
+  subscribe(std::get<0>(*opened), reader);
+  caf::anon_send(b.ch, write_packet{broadcast_addr, prio_normal, {1, 2, 3}});
+  run();
+  EXPECT_FALSE(rlog->packets.empty()) << "the local channel hears the link";
+  auto closed = call<>(a.io, atom::close_v, std::get<1>(*opened).id);
+  ASSERT_TRUE(closed);
+  run();
+  EXPECT_TRUE(log->downs.empty());
+}

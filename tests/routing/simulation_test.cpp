@@ -474,3 +474,75 @@ TEST_F(routing_sim, route_listeners_learn_reachability_changes) {
   run();
   EXPECT_EQ(log2->size(), 2u);
 }
+
+// A module that leaves cleanly says goodbye: its neighbours drop it and the
+// modules beyond them lose their routes to it at once, in zero simulated
+// time, instead of after 1.5 silent hello intervals.
+TEST_F(routing_sim, a_goodbye_withdraws_a_module_at_once) {
+  topology t{3, {{{0, 1}, "ethernet"}, {{1, 2}, "can2.0"}}};
+  auto net = build(t);
+  net.advance(1s);
+  ASSERT_TRUE(net.route(0, id_of(2)));
+  ASSERT_TRUE(net.route(1, id_of(2)));
+  auto done = call<>(net.at(2).agent, atom::close_v);
+  ASSERT_TRUE(done);
+  run(); // no time passes
+  EXPECT_FALSE(net.route(1, id_of(2)));
+  EXPECT_FALSE(net.route(0, id_of(2)));
+  EXPECT_TRUE(net.route(0, id_of(1)));
+  EXPECT_EQ(net.stats(1).rx_goodbyes, 1u);
+  // It sends no more hellos: it stays gone.
+  net.advance(1s);
+  EXPECT_FALSE(net.route(0, id_of(2)));
+}
+
+// A goodbye names an instance: one from a previous life of a module that
+// already restarted is ignored.
+TEST_F(routing_sim, a_goodbye_from_another_instance_is_ignored) {
+  topology t{2, {{{0, 1}, "ethernet"}}};
+  auto net = build(t);
+  net.advance(500ms);
+  hello bye{id_of(1), 12345, 0, 0};
+  byte_buffer bytes;
+  encode(bye, bytes);
+  auto ch = net.route(0, id_of(1))->channel;
+  caf::anon_send(net.at(0).agent, packet_received{ch, 2, bytes});
+  run();
+  EXPECT_TRUE(net.route(0, id_of(1)));
+  EXPECT_EQ(net.stats(0).rx_goodbyes, 0u);
+}
+
+// The tracer sees a packet leave, cross the router (re-fragmented for the
+// smaller MTU) and arrive, with link kinds, next hops and the route's cost.
+TEST_F(routing_sim, the_tracer_follows_a_packet_hop_by_hop) {
+  sim_network net{*this, test_prefix()};
+  std::vector<packet_trace> seen;
+  for (size_t i = 0; i < 3; ++i) {
+    net.add_module(id_of(i));
+    net.at(i).cfg.tracer = [&seen](const packet_trace& t) { seen.push_back(t); };
+  }
+  net.connect({0, 1}, "ethernet");
+  net.connect({1, 2}, "can2.0");
+  net.start();
+  net.advance(1s);
+  seen.clear();
+  net.send(0, id_of(2), 40);
+  ASSERT_EQ(seen.size(), 3u);
+  EXPECT_EQ(seen[0].what, packet_trace::originated);
+  EXPECT_EQ(seen[0].self, id_of(0));
+  EXPECT_EQ(seen[0].out_link, "ethernet");
+  EXPECT_EQ(seen[0].next, id_of(1));
+  EXPECT_EQ(seen[0].forwarding, "Ethernet-CAN2.0");
+  EXPECT_EQ(seen[1].what, packet_trace::forwarded);
+  EXPECT_EQ(seen[1].in_link, "ethernet");
+  EXPECT_EQ(seen[1].out_link, "can2.0");
+  EXPECT_EQ(seen[1].out_mtu, 8u);
+  EXPECT_EQ(seen[1].next, id_of(2));
+  EXPECT_EQ(seen[1].forwarding, "CAN2.0");
+  EXPECT_EQ(seen[2].what, packet_trace::delivered);
+  EXPECT_EQ(seen[2].self, id_of(2));
+  EXPECT_EQ(seen[2].in_link, "can2.0");
+  EXPECT_EQ(seen[2].src, id_of(0));
+  EXPECT_GT(seen[0].cost, seen[1].cost);
+  EXPECT_EQ(seen[0].bytes, seen[2].bytes);
+}
