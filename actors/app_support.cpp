@@ -888,7 +888,22 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       st.apo_of.emplace(apo.address(), id);
       self->monitor(apo);
       ++st.stats.registered;
-      return apo_ref{st.self_id, id, std::move(name), std::move(type)};
+      if (st.self_id != no_module)
+        return apo_ref{st.self_id, id, std::move(name), std::move(type)};
+      // Right after start-up the module's id is not known here yet (the
+      // periodic refresh has not run): ask the agent before answering.
+      auto rp = self->make_response_promise<apo_ref>();
+      self->request(st.agent, caf::infinite, atom::get_v, atom::stats_v)
+        .then(
+          [self, rp, id, name, type](routing_stats& rs) mutable {
+            self->state.self_id = rs.self;
+            rp.deliver(apo_ref{rs.self, id, std::move(name), std::move(type)});
+          },
+          [self, rp, id, name, type](caf::error&) mutable {
+            rp.deliver(apo_ref{self->state.self_id, id, std::move(name),
+                               std::move(type)});
+          });
+      return rp;
     },
     [self](atom::unregister, caf::actor& apo) {
       auto& st = self->state;

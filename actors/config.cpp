@@ -1,2 +1,547 @@
-// Placeholder: implemented in the config helper's change.
 #include "actors/config.hpp"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <initializer_list>
+#include <utility>
+
+#include <yaml-cpp/yaml.h>
+
+#include "actors/runtime/error.hpp"
+#include "channels/link_driver.hpp"
+#include "channels/link_profile.hpp"
+#include "routing/module_id.hpp"
+
+namespace herm {
+
+namespace {
+
+// -- errors -------------------------------------------------------------------
+
+// The first error ends parsing. Inside this file it travels as an exception
+// (yaml-cpp throws its own anyway); parse_config catches both once and turns
+// them into a caf::error, so none leaves this file.
+struct config_failure {
+  std::string text;
+};
+
+/// Longest quoted value in an error message; longer ones are cut.
+constexpr size_t max_quoted = 60;
+
+/// How a value looks in "got ...": 'text', a list, a map or nothing.
+std::string describe(const YAML::Node& x) {
+  switch (x.Type()) {
+    case YAML::NodeType::Scalar: {
+      auto& s = x.Scalar();
+      if (s.size() > max_quoted)
+        return "'" + s.substr(0, max_quoted) + "...'";
+      return "'" + s + "'";
+    }
+    case YAML::NodeType::Sequence:
+      return "a list";
+    case YAML::NodeType::Map:
+      return "a map";
+    default:
+      return "nothing";
+  }
+}
+
+/// 1-based line of a node, or `fallback` for nodes without a position.
+int line_of(const YAML::Node& x, int fallback) {
+  auto l = x.Mark().line;
+  return l >= 0 ? l + 1 : fallback;
+}
+
+/// "a, b or c".
+std::string one_of(const std::vector<std::string>& xs) {
+  std::string out;
+  for (size_t i = 0; i < xs.size(); ++i) {
+    if (i > 0)
+      out += i + 1 == xs.size() ? " or " : ", ";
+    out += xs[i];
+  }
+  return out;
+}
+
+std::string link_kind_names() {
+  std::vector<std::string> xs;
+  for (auto* k : link_kinds())
+    xs.emplace_back(k->name);
+  return one_of(xs);
+}
+
+std::string profile_names() {
+  std::vector<std::string> xs;
+  for (auto& p : builtin_profiles())
+    xs.push_back(p.name);
+  return one_of(xs);
+}
+
+std::string category_names() {
+  std::string out;
+  for (int i = 0; i <= static_cast<int>(module_category::other); ++i)
+    out += (i == 0 ? "" : ", ")
+           + std::string{to_string(static_cast<module_category>(i))};
+  return out;
+}
+
+// -- fields ---------------------------------------------------------------------
+
+/// One key of a mapping with its value, where it is and its path for errors.
+struct field {
+  std::string path;
+  YAML::Node value;
+  /// Line of the key.
+  int key_line = 0;
+
+  /// Line to blame for a bad value: the value's own, except for an empty
+  /// value, whose position yaml-cpp puts at the next token.
+  int line() const {
+    return value.IsNull() ? key_line : line_of(value, key_line);
+  }
+};
+
+class parser {
+public:
+  explicit parser(const std::string& file) : file_(file) {
+    // nop
+  }
+
+  [[noreturn]] void fail(int line, const std::string& path,
+                         const std::string& what) const {
+    auto text = file_ + ":" + std::to_string(line) + ": ";
+    if (!path.empty())
+      text += path + ": ";
+    throw config_failure{text + what};
+  }
+
+  [[noreturn]] void expected(const field& f, const std::string& what) const {
+    fail(f.line(), f.path, "expected " + what + ", got " + describe(f.value));
+  }
+
+  // -- mappings ---------------------------------------------------------------
+
+  /// A mapping's keys in file order. Refuses non-map nodes (a missing or
+  /// empty section is an empty map), non-scalar keys, duplicate keys and,
+  /// when `known` is not empty, keys outside it.
+  std::vector<field> entries(const YAML::Node& node, const std::string& path,
+                             int line, const std::string& what,
+                             const std::vector<std::string>& known = {}) const {
+    std::vector<field> out;
+    if (node.IsNull())
+      return out;
+    if (!node.IsMap())
+      fail(line_of(node, line), path,
+           "expected " + what + ", got " + describe(node));
+    for (auto kv : node) {
+      auto key_line = line_of(kv.first, line);
+      if (!kv.first.IsScalar())
+        fail(key_line, path, "expected a key, got " + describe(kv.first));
+      auto& key = kv.first.Scalar();
+      auto sub = path.empty() ? key : path + "." + key;
+      for (auto& prev : out)
+        if (prev.path == sub)
+          fail(key_line, sub, "duplicate key (first at line "
+                                + std::to_string(prev.key_line) + ")");
+      if (!known.empty()) {
+        bool ok = false;
+        for (auto& k : known)
+          ok = ok || k == key;
+        if (!ok)
+          fail(key_line, sub, "unknown key (expected " + one_of(known) + ")");
+      }
+      out.push_back(field{sub, kv.second, key_line});
+    }
+    return out;
+  }
+
+  static const field* find(const std::vector<field>& fs,
+                           const std::string& path) {
+    for (auto& f : fs)
+      if (f.path == path)
+        return &f;
+    return nullptr;
+  }
+
+  /// The field at `path`, or a "missing" error at `line` (the mapping's).
+  const field& require(const std::vector<field>& fs, const std::string& path,
+                       int line, const std::string& what) const {
+    if (auto* f = find(fs, path))
+      return *f;
+    fail(line, path, "missing (required: " + what + ")");
+  }
+
+  // -- scalars --------------------------------------------------------------
+
+  /// A scalar's text; empty text only when `allow_empty`.
+  std::string text(const field& f, const std::string& what,
+                   bool allow_empty = false) const {
+    if (!f.value.IsScalar() || (!allow_empty && f.value.Scalar().empty()))
+      expected(f, what);
+    return f.value.Scalar();
+  }
+
+  /// A decimal integer in [min, max].
+  uint64_t integer(const field& f, uint64_t min, uint64_t max) const {
+    auto what = "an integer in [" + std::to_string(min) + ", "
+                + std::to_string(max) + "]";
+    if (!f.value.IsScalar())
+      expected(f, what);
+    auto& s = f.value.Scalar();
+    bool digits = !s.empty() && s.size() <= 20;
+    for (auto c : s)
+      digits = digits && c >= '0' && c <= '9';
+    if (!digits)
+      expected(f, what);
+    errno = 0;
+    auto val = std::strtoull(s.c_str(), nullptr, 10);
+    if (errno != 0 || val < min || val > max)
+      expected(f, what);
+    return val;
+  }
+
+  /// A finite number in [min, max].
+  double number(const field& f, double min, double max) const {
+    auto what = "a number in [" + format(min) + ", " + format(max) + "]";
+    if (!f.value.IsScalar() || f.value.Scalar().empty())
+      expected(f, what);
+    auto& s = f.value.Scalar();
+    errno = 0;
+    char* end = nullptr;
+    auto val = std::strtod(s.c_str(), &end);
+    if (errno != 0 || *end != '\0' || !std::isfinite(val) || val < min
+        || val > max)
+      expected(f, what);
+    return val;
+  }
+
+  std::string choice(const field& f,
+                     const std::vector<std::string>& xs) const {
+    if (f.value.IsScalar())
+      for (auto& x : xs)
+        if (f.value.Scalar() == x)
+          return x;
+    expected(f, one_of(xs));
+  }
+
+  std::chrono::milliseconds millis(const field& f, uint64_t min,
+                                   uint64_t max) const {
+    return std::chrono::milliseconds{
+      static_cast<std::chrono::milliseconds::rep>(integer(f, min, max))};
+  }
+
+  /// An option's text: a scalar as written, a list of scalars joined with
+  /// ",".
+  std::string option(const field& f) const {
+    static const std::string what = "a scalar or a list of scalars";
+    if (f.value.IsScalar())
+      return f.value.Scalar();
+    if (!f.value.IsSequence())
+      expected(f, what);
+    std::string out;
+    size_t i = 0;
+    for (auto x : f.value) {
+      field item{f.path + "[" + std::to_string(i) + "]", x, f.line()};
+      if (!x.IsScalar())
+        expected(item, "a scalar");
+      out += (i++ == 0 ? "" : ",") + x.Scalar();
+    }
+    return out;
+  }
+
+  // -- sections -------------------------------------------------------------
+
+  void module(const field& f, file_config& cfg) const {
+    auto fs = entries(f.value, f.path, f.key_line, "a map",
+                      {"name", "id", "hello_interval_ms", "hello_loss",
+                       "update_every", "hold_factor", "announce_every"});
+    auto line = f.key_line;
+    auto& r = cfg.module.routing;
+    cfg.name = module_name(require(fs, "module.name", line, name_rule));
+    if (auto* x = find(fs, "module.id"))
+      r.id = module_id_of(*x);
+    if (auto* x = find(fs, "module.hello_interval_ms"))
+      r.hello_interval = millis(*x, 4, 65535);
+    if (auto* x = find(fs, "module.hello_loss"))
+      r.hello_loss = number(*x, 1, 100);
+    if (auto* x = find(fs, "module.update_every"))
+      r.update_every = static_cast<uint32_t>(integer(*x, 1, 1000));
+    if (auto* x = find(fs, "module.hold_factor"))
+      r.hold_factor = number(*x, 1, 1000);
+    if (auto* x = find(fs, "module.announce_every"))
+      r.announce_every = static_cast<uint32_t>(integer(*x, 1, 1000000));
+  }
+
+  static constexpr const char* name_rule
+    = "a name of 1 to 64 characters from [A-Za-z0-9_.-]";
+
+  std::string module_name(const field& f) const {
+    if (!f.value.IsScalar())
+      expected(f, name_rule);
+    auto& s = f.value.Scalar();
+    bool ok = !s.empty() && s.size() <= 64;
+    for (auto c : s)
+      ok = ok
+           && ((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z')
+               || (c >= '0' && c <= '9') || c == '_' || c == '.' || c == '-');
+    if (!ok)
+      expected(f, name_rule);
+    return s;
+  }
+
+  module_id module_id_of(const field& f) const {
+    if (f.value.IsScalar()) {
+      auto& s = f.value.Scalar();
+      if (s == "dynamic")
+        return no_module;
+      if (auto cat = parse_module_category(s))
+        return static_pool(*cat).first;
+      if (auto id = parse_module_id(s); id && is_unicast(*id))
+        return *id;
+    }
+    expected(f, "a module id (0x0001..0xFFFE), \"dynamic\" or a category ("
+                  + category_names() + ")");
+  }
+
+  void log(const field& f, file_config& cfg) const {
+    auto fs = entries(f.value, f.path, f.key_line, "a map",
+                      {"level", "format"});
+    if (auto* x = find(fs, "log.level"))
+      cfg.log_level
+        = choice(*x, {"trace", "debug", "info", "warn", "error", "off"});
+    if (auto* x = find(fs, "log.format"))
+      cfg.log_format = choice(*x, {"text", "json"});
+  }
+
+  void scheduler(const field& f, file_config& cfg) const {
+    auto fs = entries(f.value, f.path, f.key_line, "a map",
+                      {"policy", "threads"});
+    if (auto* x = find(fs, "scheduler.policy"))
+      cfg.scheduler = choice(*x, {"sharing", "stealing"});
+    if (auto* x = find(fs, "scheduler.threads"))
+      cfg.threads = static_cast<size_t>(integer(*x, 0, 256));
+  }
+
+  /// Returns true when the section names a socket (or turns it off).
+  bool control(const field& f, file_config& cfg) const {
+    auto fs = entries(f.value, f.path, f.key_line, "a map", {"socket"});
+    auto* x = find(fs, "control.socket");
+    if (x == nullptr)
+      return false;
+    // sockaddr_un::sun_path holds 108 bytes with the terminating NUL.
+    auto path = text(*x, "a socket path of at most 107 bytes or \"off\"");
+    if (path.size() > 107)
+      expected(*x, "a socket path of at most 107 bytes or \"off\"");
+    cfg.control_socket = path == "off" ? std::string{} : path;
+    return true;
+  }
+
+  void apps(const field& f, file_config& cfg) const {
+    auto fs = entries(f.value, f.path, f.key_line, "a map",
+                      {"tick_ms", "request_timeout_ms", "unreachable_grace_ms",
+                       "rebind_interval_ms", "watch_refresh_ms",
+                       "subscription_lease_ms", "remote_entry_ttl_ms",
+                       "max_pending"});
+    constexpr uint64_t day = 86'400'000;
+    auto& a = cfg.module.apps;
+    if (auto* x = find(fs, "apps.tick_ms"))
+      a.tick = millis(*x, 1, 60'000);
+    if (auto* x = find(fs, "apps.request_timeout_ms"))
+      a.request_timeout = millis(*x, 1, day);
+    if (auto* x = find(fs, "apps.unreachable_grace_ms"))
+      a.unreachable_grace = millis(*x, 0, day);
+    if (auto* x = find(fs, "apps.rebind_interval_ms"))
+      a.rebind_interval = millis(*x, 1, day);
+    if (auto* x = find(fs, "apps.watch_refresh_ms"))
+      a.watch_refresh = millis(*x, 1, day);
+    if (auto* x = find(fs, "apps.subscription_lease_ms"))
+      a.subscription_lease = millis(*x, 3, day);
+    if (auto* x = find(fs, "apps.remote_entry_ttl_ms"))
+      a.remote_entry_ttl = millis(*x, 1, day);
+    if (auto* x = find(fs, "apps.max_pending"))
+      a.max_pending = static_cast<size_t>(integer(*x, 1, 1'000'000));
+  }
+
+  void channels(const field& f, file_config& cfg) const {
+    if (f.value.IsNull())
+      return;
+    if (!f.value.IsSequence())
+      expected(f, "a list of channels");
+    size_t i = 0;
+    for (auto node : f.value) {
+      auto path = "channels[" + std::to_string(i++) + "]";
+      auto line = line_of(node, f.line());
+      auto fs = entries(node, path, line,
+                        "a map with name, kind and interface");
+      device_config dev;
+      dev.name = text(require(fs, path + ".name", line, "a channel name"),
+                      "a channel name");
+      for (size_t j = 0; j < cfg.module.devices.size(); ++j)
+        if (cfg.module.devices[j].name == dev.name)
+          fail(find(fs, path + ".name")->line(), path + ".name",
+               "duplicate channel name '" + dev.name + "' (first at line "
+                 + std::to_string(cfg.device_lines[j]) + ")");
+      auto& kind = require(fs, path + ".kind", line,
+                           "a link kind: " + link_kind_names());
+      if (!kind.value.IsScalar() || find_link_kind(kind.value.Scalar()) == nullptr)
+        expected(kind, "a link kind (" + link_kind_names() + ")");
+      dev.kind = kind.value.Scalar();
+      dev.interface = text(require(fs, path + ".interface", line,
+                                   "the interface, e.g. 127.0.0.1:47000"),
+                           "an interface");
+      auto prefix = path.size() + 1;
+      for (auto& x : fs) {
+        auto key = x.path.substr(prefix);
+        if (key == "name" || key == "kind" || key == "interface")
+          continue;
+        if (key == "profile") {
+          if (!x.value.IsScalar() || find_profile(x.value.Scalar()) == nullptr)
+            expected(x, "a built-in profile (" + profile_names() + ")");
+        } else if (key == "bandwidth") {
+          integer(x, 1, 100'000'000'000ull);
+        } else if (key == "mtu") {
+          integer(x, 1, 65535);
+        } else if (key == "delay_coef") {
+          number(x, 0.001, 1000);
+        }
+        dev.options[key] = option(x);
+      }
+      cfg.module.devices.push_back(std::move(dev));
+      cfg.device_lines.push_back(line);
+    }
+  }
+
+  void apos(const field& f, file_config& cfg) const {
+    if (f.value.IsNull())
+      return;
+    if (!f.value.IsSequence())
+      expected(f, "a list of APOs");
+    size_t i = 0;
+    for (auto node : f.value) {
+      auto path = "apos[" + std::to_string(i++) + "]";
+      auto line = line_of(node, f.line());
+      auto fs = entries(node, path, line, "a map with name and kind",
+                        {"name", "kind", "type", "options"});
+      apo_config apo;
+      apo.line = line;
+      auto& name = require(fs, path + ".name", line, "an APO name");
+      apo.name = text(name, "a name of 1 to 255 bytes");
+      if (apo.name.size() > 255)
+        expected(name, "a name of 1 to 255 bytes");
+      for (auto& prev : cfg.apos)
+        if (prev.name == apo.name)
+          fail(name.line(), name.path, "duplicate APO name '" + apo.name
+                                         + "' (first at line "
+                                         + std::to_string(prev.line) + ")");
+      apo.kind = text(require(fs, path + ".kind", line, "an APO kind"),
+                      "an APO kind");
+      apo.type = "herm." + apo.kind;
+      if (auto* x = find(fs, path + ".type"))
+        apo.type = text(*x, "an interface type name");
+      if (auto* x = find(fs, path + ".options")) {
+        auto prefix = x->path.size() + 1;
+        for (auto& opt : entries(x->value, x->path, x->line(),
+                                 "a map of options"))
+          apo.options[opt.path.substr(prefix)] = option(opt);
+      }
+      cfg.apos.push_back(std::move(apo));
+    }
+  }
+
+  file_config document(const YAML::Node& root) const {
+    file_config cfg;
+    cfg.path = file_;
+    auto fs = entries(root, "", 1, "a map of sections",
+                      {"module", "log", "scheduler", "control", "apps",
+                       "channels", "apos"});
+    // The module first: the control socket's default needs its name.
+    module(require(fs, "module", 1, "the module's name and id"), cfg);
+    bool has_socket = false;
+    for (auto& f : fs) {
+      if (f.path == "log")
+        log(f, cfg);
+      else if (f.path == "scheduler")
+        scheduler(f, cfg);
+      else if (f.path == "control")
+        has_socket = control(f, cfg);
+      else if (f.path == "apps")
+        apps(f, cfg);
+      else if (f.path == "channels")
+        channels(f, cfg);
+      else if (f.path == "apos")
+        apos(f, cfg);
+    }
+    if (!has_socket)
+      cfg.control_socket = default_control_socket(cfg.name);
+    return cfg;
+  }
+
+private:
+  static std::string format(double x) {
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%g", x);
+    return buf;
+  }
+
+  const std::string& file_;
+};
+
+} // namespace
+
+caf::expected<file_config> parse_config(const std::string& text,
+                                        const std::string& path) {
+  parser p{path};
+  try {
+    auto docs = YAML::LoadAll(text);
+    if (docs.size() > 1)
+      p.fail(line_of(docs[1], 1), "",
+             "expected one YAML document, got a second one here");
+    return p.document(docs.empty() ? YAML::Node{} : docs[0]);
+  } catch (const config_failure& e) {
+    return make_error(ec::invalid_config, e.text);
+  } catch (const YAML::Exception& e) {
+    auto line = e.mark.line >= 0 ? e.mark.line + 1 : 1;
+    return make_error(ec::invalid_config,
+                      path + ":" + std::to_string(line) + ": " + e.msg);
+  }
+}
+
+caf::expected<file_config> load_config(const std::string& path) {
+  // Config files are small; a bound keeps a mistaken path (a device, a
+  // log) from being read whole.
+  constexpr size_t max_size = 1024 * 1024;
+  auto fail = [&](const std::string& why) {
+    return make_error(ec::invalid_config, path + ": cannot read: " + why);
+  };
+  auto* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr)
+    return fail(std::strerror(errno));
+  std::string text;
+  char buf[4096];
+  size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof(buf), f)) > 0 && text.size() <= max_size)
+    text.append(buf, n);
+  auto err = std::ferror(f) ? errno : 0;
+  std::fclose(f);
+  if (err != 0)
+    return fail(std::strerror(err));
+  if (text.size() > max_size)
+    return fail("larger than 1 MiB");
+  return parse_config(text, path);
+}
+
+std::string default_control_socket(const std::string& name) {
+  auto uid = ::geteuid();
+  if (uid == 0)
+    return "/run/herm/" + name + ".sock";
+  if (auto* dir = std::getenv("XDG_RUNTIME_DIR"); dir != nullptr && *dir != '\0')
+    return std::string{dir} + "/herm/" + name + ".sock";
+  return "/tmp/herm-" + std::to_string(uid) + "/" + name + ".sock";
+}
+
+} // namespace herm

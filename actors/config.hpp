@@ -61,12 +61,17 @@ struct file_config {
   std::string path;
 };
 
-/// Parses `text` as a config file named `path` (for error messages).
+/// Parses `text` as a config file named `path` (for error messages). Every
+/// error is ec::invalid_config with the context
+/// "PATH:LINE: FIELD: expected WHAT, got 'VALUE'" (LINE 1-based; FIELD a path
+/// such as channels[0].mtu, list indexes 0-based), YAML syntax errors as
+/// "PATH:LINE: MESSAGE". The first error ends parsing.
 caf::expected<file_config> parse_config(const std::string& text,
                                         const std::string& path);
 
-/// Reads and parses the file at `path`. A file that cannot be read is an
-/// error naming it and the reason.
+/// Reads and parses the file at `path`. A file that cannot be read (or is
+/// larger than 1 MiB) is ec::invalid_config naming it and the reason:
+/// "PATH: cannot read: No such file or directory".
 caf::expected<file_config> load_config(const std::string& path);
 
 /// The default control socket of a module named `name`:

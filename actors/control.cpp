@@ -1,2 +1,858 @@
-// Placeholder: implemented in the control helper's change.
+// The control service actor: JSON requests in, JSON replies out, answered
+// from the module's IO manager, routing agent and application support actor
+// without ever blocking. Requests for another module go to that module's
+// control service through a proxy (cached per module). Protocol:
+// docs/protocol.md ("Control requests").
+
 #include "actors/control.hpp"
+
+#include <algorithm>
+#include <exception>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+
+#include <nlohmann/json.hpp>
+
+#include "caf/actor_cast.hpp"
+#include "caf/actor_system.hpp"
+#include "caf/sec.hpp"
+#include "caf/stateful_actor.hpp"
+#include "caf/typed_event_based_actor.hpp"
+
+#include "actors/runtime/error.hpp"
+#include "actors/runtime/type_ids.hpp"
+#include "routing/metric.hpp"
+
+namespace herm {
+
+namespace {
+
+using json = nlohmann::json;
+using clock_type = std::chrono::steady_clock;
+using ms = std::chrono::milliseconds;
+
+/// How long a forwarded request waits for the control APO's discovery.
+constexpr uint32_t discovery_ms = 500;
+
+/// Bounds on what a request may ask for.
+constexpr uint32_t max_ping_count = 1000;
+constexpr uint32_t max_timeout_ms = 600000;
+
+// -- replies -------------------------------------------------------------------------
+
+/// Never throws on odd bytes in names: invalid UTF-8 is replaced.
+std::string dump(const json& j) {
+  return j.dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
+std::string ok_reply(json result) {
+  return dump(json{{"ok", true}, {"result", std::move(result)}});
+}
+
+std::string error_reply(const std::string& code, const std::string& message) {
+  return dump(json{{"ok", false},
+                   {"error", {{"code", code}, {"message", message}}}});
+}
+
+/// "no_route" for herm's errors, "timeout" for CAF's request timeout,
+/// "system.NAME" for CAF's other errors.
+std::string error_code(const caf::error& err) {
+  if (!err)
+    return "none";
+  if (err.category() == caf::atom("herm"))
+    return to_string(static_cast<ec>(err.code()));
+  if (err.category() == caf::atom("system")
+      && static_cast<caf::sec>(err.code()) == caf::sec::request_timeout)
+    return "timeout";
+  auto text = render(err);
+  return text.substr(0, text.find(':'));
+}
+
+/// The error's context when it is a sentence, else the whole rendering.
+std::string error_message(const caf::error& err) {
+  if (err && err.context().match_elements<std::string>())
+    return err.context().get_as<std::string>(0);
+  return render(err);
+}
+
+std::string error_reply(const caf::error& err) {
+  return error_reply(error_code(err), error_message(err));
+}
+
+// -- JSON of HERM's types ----------------------------------------------------------------
+
+json cost_json(uint64_t cost) {
+  return cost >= infinite_metric ? json(nullptr) : json(cost);
+}
+
+json to_json(const link_profile& p) {
+  return {{"name", p.name},
+          {"bandwidth_bps", p.bandwidth_bps},
+          {"mtu", p.mtu},
+          {"multi_access", p.multi_access},
+          {"delay_coef", p.delay_coef},
+          {"cost", p.bandwidth_bps > 0 ? cost_json(link_cost(p)) : json(nullptr)}};
+}
+
+json to_json(const channel_stats& s) {
+  return {{"tx_packets", s.tx_packets},
+          {"tx_bytes", s.tx_bytes},
+          {"tx_frames", s.tx_frames},
+          {"tx_dropped", s.tx_dropped},
+          {"rx_packets", s.rx_packets},
+          {"rx_bytes", s.rx_bytes},
+          {"rx_frames", s.rx_frames},
+          {"rx_malformed", s.rx_malformed},
+          {"rx_reassembly_dropped", s.rx_reassembly_dropped},
+          {"rx_duplicates", s.rx_duplicates}};
+}
+
+json to_json(const channel_entry& e) {
+  return {{"id", e.id},
+          {"device", e.request.device},
+          {"address", e.request.address},
+          {"persistent", e.request.persistent},
+          {"routed", !e.request.local},
+          {"state", e.state},
+          {"last_error", e.last_error},
+          {"restarts", e.restarts},
+          {"kind", e.info.kind},
+          {"local", e.info.local},
+          {"profile", to_json(e.info.profile)},
+          {"max_packet", e.info.max_packet},
+          {"peers", e.info.peers},
+          {"stats", nullptr}};
+}
+
+json to_json(const routing_stats& s) {
+  return {{"self", to_hex(s.self)},
+          {"instance", s.instance},
+          {"assigned", s.assigned},
+          {"renumberings", s.renumberings},
+          {"reachable", s.reachable},
+          {"delivered", s.delivered},
+          {"forwarded", s.forwarded},
+          {"originated", s.originated},
+          {"dropped_no_route", s.dropped_no_route},
+          {"dropped_hop_limit", s.dropped_hop_limit},
+          {"dropped_no_receiver", s.dropped_no_receiver},
+          {"broadcasts_originated", s.broadcasts_originated},
+          {"broadcasts_relayed", s.broadcasts_relayed},
+          {"dropped_duplicate", s.dropped_duplicate},
+          {"rx_malformed", s.rx_malformed},
+          {"rx_unknown_neighbour", s.rx_unknown_neighbour},
+          {"rx_refused_routes", s.rx_refused_routes},
+          {"rx_goodbyes", s.rx_goodbyes},
+          {"tx_hellos", s.tx_hellos},
+          {"tx_updates", s.tx_updates},
+          {"tx_update_entries", s.tx_update_entries},
+          {"tx_claims", s.tx_claims},
+          {"tx_conflicts", s.tx_conflicts},
+          {"tx_seqno_requests", s.tx_seqno_requests}};
+}
+
+json to_json(const app_support_stats& s) {
+  return {{"local_apos", s.local_apos},
+          {"known_remote_apos", s.known_remote_apos},
+          {"live_bindings", s.live_bindings},
+          {"pending_requests", s.pending_requests},
+          {"registered", s.registered},
+          {"withdrawn", s.withdrawn},
+          {"queries_sent", s.queries_sent},
+          {"queries_answered", s.queries_answered},
+          {"answers_received", s.answers_received},
+          {"requests_sent", s.requests_sent},
+          {"oneway_sent", s.oneway_sent},
+          {"requests_served", s.requests_served},
+          {"oneway_delivered", s.oneway_delivered},
+          {"responses_received", s.responses_received},
+          {"request_timeouts", s.request_timeouts},
+          {"proxies_ended", s.proxies_ended},
+          {"published", s.published},
+          {"publications_sent", s.publications_sent},
+          {"publications_received", s.publications_received},
+          {"publications_delivered", s.publications_delivered},
+          {"publications_lost", s.publications_lost},
+          {"rx_malformed", s.rx_malformed},
+          {"rx_unknown_apo", s.rx_unknown_apo},
+          {"rx_unknown_type", s.rx_unknown_type},
+          {"rx_unexpected_response", s.rx_unexpected_response},
+          {"tx_refused", s.tx_refused},
+          {"dropped_no_route", s.dropped_no_route}};
+}
+
+json to_json(const neighbour_info& n) {
+  json cost = json::array();
+  for (auto c : n.cost)
+    cost.push_back(cost_json(c));
+  return {{"module", to_hex(n.id)},
+          {"channel", n.channel},
+          {"link_address", n.link_address},
+          {"instance", n.instance},
+          {"link_kind", n.link_kind},
+          {"cost", std::move(cost)},
+          {"last_heard_ms", n.last_heard_ms}};
+}
+
+json to_json(const apo_info& a) {
+  return {{"module", to_hex(a.ref.module)},
+          {"apo", a.ref.apo},
+          {"name", a.ref.name},
+          {"type", a.ref.type},
+          {"local", a.local},
+          {"watchers", a.watchers},
+          {"age_ms", a.age_ms}};
+}
+
+/// A route row, completed with what the neighbour table says about its next
+/// hop (its module, link kind and direct cost in the row's class).
+json to_json(const route_info& r, const std::vector<neighbour_info>& ns) {
+  json j{{"destination", to_hex(r.destination)},
+         {"size_class", r.size_class},
+         {"size_class_bytes", r.size_class < size_classes
+                                ? json(size_class_bytes[r.size_class])
+                                : json(nullptr)},
+         {"channel", r.channel},
+         {"neighbour", r.neighbour},
+         {"neighbour_module", nullptr},
+         {"link_kind", nullptr},
+         {"link_cost", nullptr},
+         {"cost", cost_json(r.cost)},
+         {"hops", r.hops},
+         {"forwarding", r.forwarding},
+         {"selected", r.selected},
+         {"feasible", r.feasible}};
+  for (auto& n : ns)
+    if (n.channel == r.channel && n.link_address == r.neighbour) {
+      j["neighbour_module"] = to_hex(n.id);
+      j["link_kind"] = n.link_kind;
+      if (r.size_class < n.cost.size())
+        j["link_cost"] = cost_json(n.cost[r.size_class]);
+      break;
+    }
+  return j;
+}
+
+// -- request fields ------------------------------------------------------------------------
+
+/// A module id given as "0x4E", "78" or 78.
+std::optional<module_id> module_field(const json& v) {
+  if (v.is_string())
+    return parse_module_id(v.get<std::string>());
+  if (v.is_number_unsigned() && v.get<uint64_t>() <= 0xFFFF)
+    return static_cast<module_id>(v.get<uint64_t>());
+  return std::nullopt;
+}
+
+/// An unsigned field in [lo, hi], `fallback` when absent; nullopt when
+/// present but not such a number.
+std::optional<uint32_t> uint_field(const json& req, const char* key,
+                                   uint32_t fallback, uint32_t lo, uint32_t hi) {
+  auto i = req.find(key);
+  if (i == req.end())
+    return fallback;
+  if (!i->is_number_unsigned() || i->get<uint64_t>() < lo
+      || i->get<uint64_t>() > hi)
+    return std::nullopt;
+  return static_cast<uint32_t>(i->get<uint64_t>());
+}
+
+std::string string_field(const json& req, const char* key) {
+  auto i = req.find(key);
+  return i != req.end() && i->is_string() ? i->get<std::string>() : std::string{};
+}
+
+// -- the actor ------------------------------------------------------------------------------
+
+struct control_state {
+  static inline const char* name = "herm.control";
+
+  module_handles m;
+  std::string module_name;
+  clock_type::time_point started;
+  /// "yes" once registered as an APO, else why not (other modules cannot
+  /// reach a service that is not registered).
+  std::string registered = "pending";
+  /// Proxies of other modules' control services; an entry is dropped when a
+  /// request through it fails.
+  std::map<module_id, caf::actor> proxies;
+};
+
+using control_impl = control_actor::stateful_pointer<control_state>;
+using reply_promise = caf::typed_response_promise<std::string>;
+
+/// Delivers any error as an error reply.
+auto fail_with(reply_promise rp) {
+  return [rp](caf::error& err) mutable { rp.deliver(error_reply(err)); };
+}
+
+/// Counts outstanding parallel requests; runs `done` after the last.
+struct join_counter {
+  size_t pending = 0;
+  std::function<void()> done;
+
+  void finish_one() {
+    if (--pending == 0)
+      done();
+  }
+};
+
+/// Asks the agent for this module's id (it may change under dynamic
+/// addressing, so it is never cached).
+void with_self_id(control_impl self, ms timeout, reply_promise rp,
+                  std::function<void(routing_stats&)> next) {
+  self->request(self->state.m.agent, timeout, atom::get_v, atom::stats_v)
+    .then([next](routing_stats& rs) { next(rs); }, fail_with(rp));
+}
+
+/// Finds the control service of `target`: ourselves, a cached proxy, a
+/// remote APO already in the application table, or one discovered now.
+void resolve(control_impl self, module_id target, module_id self_id,
+             ms timeout, std::function<void(caf::expected<caf::actor>)> next) {
+  if (target == self_id) {
+    next(caf::actor_cast<caf::actor>(self));
+    return;
+  }
+  auto& st = self->state;
+  if (auto i = st.proxies.find(target); i != st.proxies.end()) {
+    next(i->second);
+    return;
+  }
+  auto unknown = [target] {
+    return make_error(ec::not_found, "unknown module " + to_hex(target)
+                                       + " (not reachable or no control service)");
+  };
+  auto bind = [self, target, timeout, next](apo_ref ref) {
+    self->request(self->state.m.apps, timeout, atom::bind_v, ref)
+      .then(
+        [self, target, next](caf::actor& proxy) {
+          self->state.proxies[target] = proxy;
+          next(proxy);
+        },
+        [next](caf::error& err) { next(std::move(err)); });
+  };
+  auto discover = [self, target, timeout, next, bind, unknown] {
+    apo_query q{query_by::name, control_apo_name, discovery_ms, false};
+    self
+      ->request(self->state.m.apps, timeout + ms(discovery_ms), atom::find_v,
+                std::move(q))
+      .then(
+        [target, next, bind, unknown](std::vector<apo_ref>& found) {
+          for (auto& ref : found)
+            if (ref.module == target && ref.type == control_apo_type) {
+              bind(ref);
+              return;
+            }
+          next(unknown());
+        },
+        [next](caf::error& err) { next(std::move(err)); });
+  };
+  self->request(st.m.apps, timeout, atom::get_v, atom::apps_v)
+    .then(
+      [target, bind, discover](std::vector<apo_info>& rows) {
+        for (auto& row : rows)
+          if (!row.local && row.ref.module == target
+              && row.ref.name == control_apo_name
+              && row.ref.type == control_apo_type) {
+            bind(row.ref);
+            return;
+          }
+        discover();
+      },
+      [next](caf::error& err) { next(std::move(err)); });
+}
+
+/// Sends `text` to the control service of `target` and relays its reply.
+/// A failure through a cached proxy (the module restarted, the binding
+/// ended) is retried once with a fresh binding.
+void forward(control_impl self, module_id target, module_id self_id,
+             std::string text, ms timeout, reply_promise rp, bool retried) {
+  bool cached = self->state.proxies.count(target) > 0;
+  resolve(self, target, self_id, timeout,
+          [=](caf::expected<caf::actor> dest) mutable {
+            if (!dest) {
+              rp.deliver(error_reply(dest.error()));
+              return;
+            }
+            self->request(*dest, timeout, text)
+              .then([rp](std::string& reply) mutable { rp.deliver(reply); },
+                    [=](caf::error& err) mutable {
+                      self->state.proxies.erase(target);
+                      bool timed_out
+                        = is(err, ec::timeout)
+                          || err == caf::make_error(caf::sec::request_timeout);
+                      if (cached && !retried && !timed_out)
+                        forward(self, target, self_id, text, timeout, rp, true);
+                      else
+                        rp.deliver(error_reply(err));
+                    });
+          });
+}
+
+// -- commands ----------------------------------------------------------------------------
+
+void cmd_info(control_impl self, ms timeout, reply_promise rp) {
+  with_self_id(self, timeout, rp, [self, timeout, rp](routing_stats& rs) {
+    auto& st = self->state;
+    json j{{"name", st.module_name},
+           {"module", to_hex(rs.self)},
+           {"id", rs.self},
+           {"instance", rs.instance},
+           {"assigned", rs.assigned},
+           {"uptime_ms", std::chrono::duration_cast<ms>(clock_type::now()
+                                                         - st.started)
+                           .count()},
+           {"reachable", rs.reachable},
+           {"registered", st.registered}};
+    self->request(st.m.apps, timeout, atom::get_v, atom::stats_v)
+      .then(
+        [self, timeout, rp, j](app_support_stats& as) mutable {
+          j["apps"] = {{"local", as.local_apos},
+                       {"known_remote", as.known_remote_apos},
+                       {"bindings", as.live_bindings}};
+          self->request(self->state.m.agent, timeout, atom::get_v,
+                        atom::neighbors_v)
+            .then(
+              [self, timeout, rp, j](std::vector<neighbour_info>& ns) mutable {
+                j["neighbours"] = ns.size();
+                self->request(self->state.m.io, timeout, atom::get_v,
+                              atom::channels_v)
+                  .then(
+                    [rp, j](std::vector<channel_entry>& cs) mutable {
+                      size_t up = 0;
+                      for (auto& c : cs)
+                        up += c.state == "up" ? 1 : 0;
+                      j["channels"] = {{"up", up}, {"total", cs.size()}};
+                      rp.deliver(ok_reply(std::move(j)));
+                    },
+                    fail_with(rp));
+              },
+              fail_with(rp));
+        },
+        fail_with(rp));
+  });
+}
+
+/// The Channel Table with each up channel's counters; `done` gets the rows.
+void collect_channels(control_impl self, ms timeout, reply_promise rp,
+                      std::function<void(json)> done) {
+  self->request(self->state.m.io, timeout, atom::get_v, atom::channels_v)
+    .then(
+      [self, timeout, done](std::vector<channel_entry>& entries) {
+        auto rows = std::make_shared<json>(json::array());
+        auto join = std::make_shared<join_counter>();
+        join->done = [rows, done] { done(std::move(*rows)); };
+        join->pending = 1; // released below, after every request is out
+        for (auto& e : entries) {
+          rows->push_back(to_json(e));
+          if (e.state != "up")
+            continue;
+          auto index = rows->size() - 1;
+          ++join->pending;
+          self->request(self->state.m.io, timeout, atom::get_v, e.id)
+            .then(
+              [self, timeout, rows, join, index](channel_actor& ch) {
+                self->request(ch, timeout, atom::get_v, atom::stats_v)
+                  .then(
+                    [rows, join, index](channel_stats& s) {
+                      (*rows)[index]["stats"] = to_json(s);
+                      join->finish_one();
+                    },
+                    [join](caf::error&) { join->finish_one(); });
+              },
+              [join](caf::error&) { join->finish_one(); });
+        }
+        join->finish_one();
+      },
+      fail_with(rp));
+}
+
+/// Every route, or with "all": false only the selected ones of class 0
+/// (what forwarding uses for small packets; keeps replies from large
+/// networks small).
+void cmd_routes(control_impl self, const json& req, ms timeout,
+                reply_promise rp) {
+  auto ai = req.find("all");
+  bool all = ai == req.end() || !ai->is_boolean() || ai->get<bool>();
+  auto& st = self->state;
+  self->request(st.m.agent, timeout, atom::get_v, atom::routes_v)
+    .then(
+      [self, timeout, rp, all](std::vector<route_info>& routes) {
+        if (!all)
+          routes.erase(std::remove_if(routes.begin(), routes.end(),
+                                      [](const route_info& r) {
+                                        return !r.selected || r.size_class != 0;
+                                      }),
+                       routes.end());
+        self->request(self->state.m.agent, timeout, atom::get_v,
+                      atom::neighbors_v)
+          .then(
+            [rp, routes](std::vector<neighbour_info>& ns) mutable {
+              json rows = json::array();
+              for (auto& r : routes)
+                rows.push_back(to_json(r, ns));
+              rp.deliver(ok_reply(std::move(rows)));
+            },
+            fail_with(rp));
+      },
+      fail_with(rp));
+}
+
+void cmd_neighbors(control_impl self, ms timeout, reply_promise rp) {
+  self->request(self->state.m.agent, timeout, atom::get_v, atom::neighbors_v)
+    .then(
+      [rp](std::vector<neighbour_info>& ns) mutable {
+        json rows = json::array();
+        for (auto& n : ns)
+          rows.push_back(to_json(n));
+        rp.deliver(ok_reply(std::move(rows)));
+      },
+      fail_with(rp));
+}
+
+void cmd_apps(control_impl self, ms timeout, reply_promise rp) {
+  self->request(self->state.m.apps, timeout, atom::get_v, atom::apps_v)
+    .then(
+      [rp](std::vector<apo_info>& apps) mutable {
+        json rows = json::array();
+        for (auto& a : apps)
+          rows.push_back(to_json(a));
+        rp.deliver(ok_reply(std::move(rows)));
+      },
+      fail_with(rp));
+}
+
+void cmd_stats(control_impl self, ms timeout, reply_promise rp) {
+  auto& st = self->state;
+  self->request(st.m.agent, timeout, atom::get_v, atom::stats_v)
+    .then(
+      [self, timeout, rp](routing_stats& rs) {
+        self->request(self->state.m.apps, timeout, atom::get_v, atom::stats_v)
+          .then(
+            [self, timeout, rp, rj = to_json(rs)](app_support_stats& as) {
+              collect_channels(
+                self, timeout, rp,
+                [rp, rj, aj = to_json(as)](json channels) mutable {
+                  json cs = json::array();
+                  for (auto& c : channels) {
+                    json row{{"id", c["id"]}, {"device", c["device"]},
+                             {"state", c["state"]},
+                             {"restarts", c["restarts"]}};
+                    if (c["stats"].is_object())
+                      row.update(c["stats"]);
+                    cs.push_back(std::move(row));
+                  }
+                  rp.deliver(ok_reply(
+                    {{"routing", rj}, {"apps", aj}, {"channels", cs}}));
+                });
+            },
+            fail_with(rp));
+      },
+      fail_with(rp));
+}
+
+void cmd_echo(control_impl self, ms timeout, reply_promise rp) {
+  with_self_id(self, timeout, rp, [self, rp](routing_stats& rs) mutable {
+    rp.deliver(ok_reply({{"module", to_hex(rs.self)},
+                         {"id", rs.self},
+                         {"name", self->state.module_name}}));
+  });
+}
+
+void cmd_link(control_impl self, const json& req, ms timeout, reply_promise rp) {
+  auto device = string_field(req, "device");
+  auto state = string_field(req, "state");
+  if (device.empty() || (state != "up" && state != "down")) {
+    rp.deliver(error_reply("invalid_parameter",
+                           "link needs \"device\" and \"state\": \"up\" or "
+                           "\"down\""));
+    return;
+  }
+  auto& io = self->state.m.io;
+  self->request(io, timeout, atom::get_v, atom::devices_v)
+    .then(
+      [self, timeout, rp, device, state](std::vector<device_info>& devs) mutable {
+        auto known = std::any_of(devs.begin(), devs.end(), [&](auto& d) {
+          return d.config.name == device;
+        });
+        if (!known) {
+          rp.deliver(error_reply("unknown_device",
+                                 "no device named '" + device + "'"));
+          return;
+        }
+        self->request(self->state.m.io, timeout, atom::get_v, atom::channels_v)
+          .then(
+            [self, timeout, rp, device, state](
+              std::vector<channel_entry>& entries) mutable {
+              std::vector<channel_id> ids;
+              for (auto& e : entries)
+                if (e.request.device == device)
+                  ids.push_back(e.id);
+              if (state == "up") {
+                if (!ids.empty()) {
+                  rp.deliver(ok_reply({{"device", device},
+                                       {"state", "up"},
+                                       {"channels", ids},
+                                       {"opened", false}}));
+                  return;
+                }
+                self
+                  ->request(self->state.m.io, timeout, atom::open_v,
+                            channel_request{device, "*", true})
+                  .then(
+                    [rp, device](channel_actor&, channel_info& info) mutable {
+                      rp.deliver(ok_reply({{"device", device},
+                                           {"state", "up"},
+                                           {"channels", json::array({info.id})},
+                                           {"opened", true}}));
+                    },
+                    fail_with(rp));
+                return;
+              }
+              auto closed = std::make_shared<json>(json::array());
+              auto join = std::make_shared<join_counter>();
+              join->pending = ids.size() + 1;
+              join->done = [rp, device, closed]() mutable {
+                rp.deliver(ok_reply({{"device", device},
+                                     {"state", "down"},
+                                     {"closed", *closed}}));
+              };
+              for (auto id : ids)
+                self->request(self->state.m.io, timeout, atom::close_v, id)
+                  .then(
+                    [closed, join, id] {
+                      closed->push_back(id);
+                      join->finish_one();
+                    },
+                    [join](caf::error&) { join->finish_one(); });
+              join->finish_one();
+            },
+            fail_with(rp));
+      },
+      fail_with(rp));
+}
+
+/// Progress of one ping: echoes are sent one after the other.
+struct ping_run {
+  module_id target = no_module;
+  module_id self_id = no_module;
+  uint32_t count = 0;
+  uint32_t sent = 0;
+  json rtts = json::array();
+  uint32_t lost = 0;
+  caf::error first_error;
+  ms timeout{0};
+  reply_promise rp;
+};
+
+void ping_next(control_impl self, std::shared_ptr<ping_run> run);
+
+void ping_finish(std::shared_ptr<ping_run> run) {
+  if (run->rtts.empty() && run->first_error) {
+    run->rp.deliver(error_reply(run->first_error));
+    return;
+  }
+  json j{{"module", to_hex(run->target)},
+         {"count", run->count},
+         {"received", run->rtts.size()},
+         {"lost", run->lost},
+         {"rtt_us", run->rtts}};
+  if (!run->rtts.empty()) {
+    uint64_t lo = UINT64_MAX, hi = 0, sum = 0;
+    for (auto& v : run->rtts) {
+      auto x = v.get<uint64_t>();
+      lo = std::min(lo, x);
+      hi = std::max(hi, x);
+      sum += x;
+    }
+    j["min_us"] = lo;
+    j["avg_us"] = sum / run->rtts.size();
+    j["max_us"] = hi;
+  }
+  run->rp.deliver(ok_reply(std::move(j)));
+}
+
+void ping_next(control_impl self, std::shared_ptr<ping_run> run) {
+  if (run->sent == run->count) {
+    ping_finish(run);
+    return;
+  }
+  ++run->sent;
+  resolve(self, run->target, run->self_id, run->timeout,
+          [self, run](caf::expected<caf::actor> dest) {
+            if (!dest) {
+              // Nothing will answer: the remaining echoes are lost too.
+              if (!run->first_error)
+                run->first_error = dest.error();
+              run->lost += run->count - run->sent + 1;
+              run->sent = run->count;
+              ping_finish(run);
+              return;
+            }
+            auto start = clock_type::now();
+            self->request(*dest, run->timeout, std::string{R"({"cmd":"echo"})"})
+              .then(
+                [self, run, start](std::string&) {
+                  auto rtt = std::chrono::duration_cast<std::chrono::microseconds>(
+                    clock_type::now() - start);
+                  run->rtts.push_back(static_cast<uint64_t>(rtt.count()));
+                  ping_next(self, run);
+                },
+                [self, run](caf::error& err) {
+                  self->state.proxies.erase(run->target);
+                  if (!run->first_error)
+                    run->first_error = err;
+                  ++run->lost;
+                  ping_next(self, run);
+                });
+          });
+}
+
+void cmd_ping(control_impl self, const json& req, ms timeout, reply_promise rp) {
+  auto mi = req.find("module");
+  auto target = mi != req.end() ? module_field(*mi) : std::nullopt;
+  auto count = uint_field(req, "count", 1, 1, max_ping_count);
+  if (!target || !count) {
+    rp.deliver(error_reply("invalid_parameter",
+                           "ping needs \"module\" (a module id) and a "
+                           "\"count\" in [1, "
+                             + std::to_string(max_ping_count) + "]"));
+    return;
+  }
+  with_self_id(self, timeout, rp,
+               [self, rp, timeout, target, count](routing_stats& rs) {
+                 auto run = std::make_shared<ping_run>();
+                 run->target = *target;
+                 run->self_id = rs.self;
+                 run->count = *count;
+                 run->timeout = timeout;
+                 run->rp = rp;
+                 ping_next(self, run);
+               });
+}
+
+/// Answers one request (docs/protocol.md, "Control requests").
+void dispatch(control_impl self, const std::string& text, reply_promise rp) {
+  auto req = json::parse(text, nullptr, false);
+  if (req.is_discarded() || !req.is_object()) {
+    rp.deliver(error_reply("invalid_request",
+                           "a request is one JSON object with a \"cmd\""));
+    return;
+  }
+  auto cmd = string_field(req, "cmd");
+  if (cmd.empty()) {
+    rp.deliver(error_reply("invalid_request",
+                           "a request needs \"cmd\" (a string)"));
+    return;
+  }
+  auto timeout_ms = uint_field(req, "timeout_ms",
+                               static_cast<uint32_t>(default_control_timeout.count()),
+                               1, max_timeout_ms);
+  if (!timeout_ms) {
+    rp.deliver(error_reply("invalid_parameter",
+                           "\"timeout_ms\" must be an integer in [1, "
+                             + std::to_string(max_timeout_ms) + "]"));
+    return;
+  }
+  auto timeout = ms(*timeout_ms);
+  // Ping's "module" is its target; any other command's is where it runs.
+  auto mi = req.find("module");
+  if (mi != req.end() && cmd != "ping") {
+    auto target = module_field(*mi);
+    if (!target || !is_unicast(*target)) {
+      rp.deliver(error_reply("invalid_parameter",
+                             "\"module\" must be a module id such as "
+                             "\"0x4E\" or 78, got "
+                               + dump(*mi)));
+      return;
+    }
+    auto rest = req;
+    rest.erase("module");
+    with_self_id(self, timeout, rp,
+                 [self, rp, timeout, target, rest](routing_stats& rs) {
+                   if (*target == rs.self)
+                     dispatch(self, dump(rest), rp);
+                   else
+                     forward(self, *target, rs.self, dump(rest), timeout, rp,
+                             false);
+                 });
+    return;
+  }
+  if (cmd == "info")
+    cmd_info(self, timeout, rp);
+  else if (cmd == "channels")
+    collect_channels(self, timeout, rp, [rp](json rows) mutable {
+      rp.deliver(ok_reply(std::move(rows)));
+    });
+  else if (cmd == "routes")
+    cmd_routes(self, req, timeout, rp);
+  else if (cmd == "neighbors" || cmd == "neighbours")
+    cmd_neighbors(self, timeout, rp);
+  else if (cmd == "apps")
+    cmd_apps(self, timeout, rp);
+  else if (cmd == "stats")
+    cmd_stats(self, timeout, rp);
+  else if (cmd == "echo")
+    cmd_echo(self, timeout, rp);
+  else if (cmd == "link")
+    cmd_link(self, req, timeout, rp);
+  else if (cmd == "ping")
+    cmd_ping(self, req, timeout, rp);
+  else
+    rp.deliver(error_reply("unknown_command", "unknown command '" + cmd + "'"));
+}
+
+control_actor::behavior_type control_fun(control_impl self, module_handles m,
+                                         std::string module_name) {
+  self->state.m = std::move(m);
+  self->state.module_name = std::move(module_name);
+  self->state.started = clock_type::now();
+  self->request(self->state.m.apps, std::chrono::seconds(10), atom::add_v,
+                std::string{control_apo_name}, std::string{control_apo_type},
+                caf::actor_cast<caf::actor>(self))
+    .then([self](apo_ref&) { self->state.registered = "yes"; },
+          [self](caf::error& err) { self->state.registered = render(err); });
+  return {
+    [self](std::string& text) -> caf::result<std::string> {
+      auto rp = self->make_response_promise<std::string>();
+      try {
+        dispatch(self, text, rp);
+      } catch (const std::exception& e) {
+        // nlohmann's accessors throw on odd shapes we failed to check.
+        rp.deliver(error_reply("invalid_request", e.what()));
+      }
+      return rp;
+    },
+  };
+}
+
+} // namespace
+
+control_actor spawn_control(caf::actor_system& sys, const module_handles& m,
+                            std::string module_name) {
+  return sys.spawn(control_fun, m, std::move(module_name));
+}
+
+std::chrono::milliseconds control_deadline(const std::string& request) {
+  auto timeout = default_control_timeout;
+  uint64_t times = 1;
+  auto req = json::parse(request, nullptr, false);
+  if (req.is_object()) {
+    if (auto t = uint_field(req, "timeout_ms", 0, 1, max_timeout_ms); t && *t)
+      timeout = ms(*t);
+    if (string_field(req, "cmd") == "ping")
+      if (auto n = uint_field(req, "count", 1, 1, max_ping_count))
+        times = *n;
+  }
+  // Each echo of a ping, and a forwarded request, may need a discovery
+  // first; a forwarded request may be retried once after a failed cached
+  // proxy.
+  auto one = timeout + ms(discovery_ms);
+  if (times > 1)
+    return one * static_cast<int64_t>(times) + std::chrono::seconds(1);
+  return 2 * one + std::chrono::seconds(1);
+}
+
+} // namespace herm

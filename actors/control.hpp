@@ -26,6 +26,15 @@ namespace herm {
 constexpr const char* control_apo_name = "herm.control";
 constexpr const char* control_apo_type = "herm.control/1";
 
+/// How long the service waits for what a request needs (another module's
+/// reply, each echo of a ping) unless the request says "timeout_ms".
+constexpr std::chrono::milliseconds default_control_timeout{5000};
+
+/// The longest a control service may take to answer `request` (derived from
+/// its "timeout_ms", default_control_timeout, and a ping's "count"): what a
+/// caller should wait before giving up.
+std::chrono::milliseconds control_deadline(const std::string& request);
+
 /// One request (a JSON object with at least "cmd") in, one reply out:
 /// {"ok": true, "result": ...} or {"ok": false, "error": {"code": "no_route",
 /// "message": "..."}}. Never fails at the CAF level.
@@ -47,7 +56,8 @@ using local_commands
 /// created 0700 if missing, a stale socket file replaced; a live one is an
 /// error): one JSON request per line, one JSON reply per line, any number
 /// of clients one after another. Stops, joins its thread and removes the
-/// socket file when destroyed.
+/// socket file when destroyed (a request in progress is abandoned; its
+/// client gets an "unavailable" error reply).
 class control_server {
 public:
   static caf::expected<std::unique_ptr<control_server>>

@@ -3,10 +3,26 @@
 // A deterministic multi-module network inside one process: every module is
 // an IO manager plus a routing agent; links are in-process segments with the
 // link profile of any Table 1 interface. Runs under CAF's test_coordinator
-// (actors/testing/deterministic_system.hpp): time moves only when the test advances
-// it. Links can be cut and restored, modules killed and revived, and a
-// packet-path checker records every module a data packet visits.
+// (actors/testing/deterministic_system.hpp): time moves only when the test
+// advances it. Links can be cut and restored, modules killed and revived, and
+// a packet-path checker records every module a data packet visits.
+//
+// Public testing kit. Typical use (actors/testing/sim_apps.hpp adds the
+// Application Support Layer and APOs):
+//
+//   sim_network net{fx};                          // fx: deterministic_system
+//   auto a = net.add_module(0x42), b = net.add_module(0x4E);
+//   auto link = net.connect({a, b}, "can2.0");    // a Table 1 profile
+//   net.start();
+//   net.advance(std::chrono::seconds(2));         // routes converge
+//   net.cut(link); ... net.restore(link);
+//   net.kill(b); ... net.start_module(b);
+//
+// Indexes (`size_t`) name modules and links in the order they were added;
+// module ids (`module_id`) are what the network knows them by. Link with
+// herm_routing (herm_asl brings it along).
 
+#include <atomic>
 #include <functional>
 #include <map>
 #include <set>
@@ -24,38 +40,61 @@ namespace herm::testkit {
 /// Everything delivered to one module's receiver.
 using delivery_log = std::vector<packet_delivered>;
 
+/// The receiver every module subscribes for protocol 0 (`sim_network::send`).
 using sim_receiver_actor = caf::typed_actor<caf::reacts_to<packet_delivered>>;
 
+/// A simulated network of modules and links; see the file comment. Owns no
+/// actor itself: every actor it spawns is tracked by the deterministic_system,
+/// which must outlive it. Not thread-safe (test thread only).
 class sim_network {
 public:
+  /// One module and what runs on it now.
   struct module {
     module_id id = no_module;         ///< static id, or no_module if dynamic
+    /// Its routing agent's configuration; edit before `start` to change
+    /// timers (`hello_interval` defaults to the network's `hello`).
     routing_config cfg;
     io_manager_actor io;
     routing_agent_actor agent;
+    /// Protocol-0 packets delivered here since the module last started.
     std::shared_ptr<delivery_log> received;
     std::vector<size_t> links;        ///< indexes into links_
     bool alive = false;
     /// Set by `on_start` hooks (e.g. the application support actor).
     caf::actor apps;
+    /// Actors living on this module (spawned with `spawn_on`, e.g. APOs):
+    /// `kill` kills them with it. Emptied by `kill`.
+    std::vector<caf::actor> residents;
+    /// APOs registered by `spawn_apo` (actors/testing/sim_apps.hpp) since the
+    /// module last started, in the order their registrations completed.
+    std::vector<apo_ref> apos;
   };
 
   /// Runs after a module's IO manager and agent started (every start, also
   /// after `kill`): spawn what else the module runs, e.g. its application
-  /// support actor and APOs, tracked with `fx.track`.
+  /// support actor and APOs, tracked with `fx.track`. One hook: assigning
+  /// replaces it (`add_app_support` assigns it); add more with
+  /// `add_start_hook`.
   std::function<void(size_t index, module& m)> on_start;
 
+  /// One medium joining two (point-to-point) or more (bus) modules.
   struct link {
-    std::string segment;
-    std::string profile;
-    std::vector<size_t> modules;
-    bool up = true;
+    std::string segment;              ///< the in-process segment's name
+    std::string profile;              ///< Table 1 profile, e.g. "can2.0"
+    std::vector<size_t> modules;      ///< members; station i + 1 is modules[i]
+    bool up = true;                   ///< false while cut or silenced
   };
 
-  /// `prefix` keeps segment names unique per test.
-  sim_network(deterministic_system& fx, std::string prefix,
-              std::chrono::milliseconds hello = std::chrono::milliseconds(100))
-    : fx_(fx), prefix_(std::move(prefix)), hello_(hello) {
+  /// `prefix` names the in-process segments (`<prefix>-l<link index>`);
+  /// segments are process-wide, so it must be unique among the networks
+  /// alive in the process. Empty: a unique one is made up. `hello` is every
+  /// module's hello interval (routes converge within a few of them).
+  explicit sim_network(deterministic_system& fx, std::string prefix = {},
+                       std::chrono::milliseconds hello
+                       = std::chrono::milliseconds(100))
+    : fx_(fx),
+      prefix_(prefix.empty() ? unique_prefix() : std::move(prefix)),
+      hello_(hello) {
     // nop
   }
 
@@ -66,6 +105,8 @@ public:
   }
 
   /// Adds a module with a static id (or dynamic with no_module and a seed).
+  /// Returns its index. Modules added after `start` start with the next
+  /// `start` or `start_module`.
   size_t add_module(module_id id, uint64_t seed = 0) {
     module m;
     m.id = id;
@@ -81,8 +122,11 @@ public:
     return modules_.size() - 1;
   }
 
-  /// Joins `members` by one medium (two members: a point-to-point link;
-  /// more: a bus) with the given profile. Returns the link's index.
+  /// Joins `members` (module indexes) by one medium (two members: a
+  /// point-to-point link; more: a bus) with the given profile: a Table 1
+  /// name ("can2.0" (1 Mbit/s, 8-byte MTU), "ethernet", "rs232c", "usb1.1",
+  /// "usb2.0", "ieee1394a", "ieee1394b"). Call before the members start.
+  /// Returns the link's index.
   size_t connect(std::vector<size_t> members, std::string profile) {
     link l;
     l.segment = prefix_ + "-l" + std::to_string(links_.size());
@@ -102,8 +146,13 @@ public:
     fx_.run();
   }
 
+  /// Starts module `i` (again, after `kill`): a fresh IO manager, routing
+  /// agent and receiver, its links opened, then `on_start` and every start
+  /// hook. Runs no actor: follow with `run()` or `advance()`. A module
+  /// already running must be killed first.
   void start_module(size_t i) {
     auto& m = modules_[i];
+    m.apos.clear();
     m.io = fx_.track(spawn_io_manager(fx_.sys()));
     m.agent = fx_.track(spawn_routing_agent(fx_.sys(), m.io, m.cfg));
     m.received = std::make_shared<delivery_log>();
@@ -128,20 +177,49 @@ public:
     m.alive = true;
     if (on_start)
       on_start(i, m);
+    for (auto& hook : start_hooks_)
+      hook(i, m);
   }
 
-  /// Kills module `i` (its IO manager, links and agent end).
+  /// Adds a hook that runs after `on_start` whenever a module starts (also
+  /// after `kill`), in the order hooks were added: spawn a module's APOs
+  /// here (with `spawn_on` or `spawn_apo`) so that they come back with it.
+  void add_start_hook(std::function<void(size_t index, module& m)> hook) {
+    start_hooks_.push_back(std::move(hook));
+  }
+
+  /// Spawns an actor living on module `i`, as `sys().spawn(xs...)` does:
+  /// tracked by the harness and killed by `kill(i)`. Returns its handle.
+  template <class... Ts>
+  auto spawn_on(size_t i, Ts&&... xs) {
+    auto hdl = fx_.track(fx_.sys().spawn(std::forward<Ts>(xs)...));
+    modules_[i].residents.push_back(caf::actor_cast<caf::actor>(hdl));
+    return hdl;
+  }
+
+  /// Kills module `i` as a power cut would (exit reason `kill`): its
+  /// application support actor, its residents, its routing agent and IO
+  /// manager (its links' stations go with it), with no goodbye to anyone.
+  /// Neighbours notice when their channels end or hellos stop. Runs every
+  /// actor. `start_module(i)` brings it back.
   void kill(size_t i) {
     auto& m = modules_[i];
+    // The application support actor first: dying APOs are not withdrawn.
     if (m.apps)
       caf::anon_send_exit(m.apps, caf::exit_reason::kill);
+    for (auto& hdl : m.residents)
+      caf::anon_send_exit(hdl, caf::exit_reason::kill);
+    m.residents.clear();
     caf::anon_send_exit(m.agent, caf::exit_reason::kill);
     caf::anon_send_exit(m.io, caf::exit_reason::kill);
     m.alive = false;
     fx_.run();
   }
 
-  /// Cuts a link: every station on it fails; persistent channels retry.
+  /// Cuts a link (the cable is pulled): every station on it fails at once
+  /// with ec::device_failed, so its modules see the channel end; persistent
+  /// channels retry (100 ms doubling to 5 s) until `restore`. Runs every
+  /// actor.
   void cut(size_t li) {
     links_[li].up = false;
     inproc::unplug(links_[li].segment,
@@ -156,6 +234,8 @@ public:
     inproc::blackhole(links_[li].segment, true);
   }
 
+  /// Ends `cut` or `silence`: frames flow again; a cut link's channels come
+  /// back at their next retry. Runs no actor: follow with `advance()`.
   void restore(size_t li) {
     inproc::blackhole(links_[li].segment, false);
     links_[li].up = true;
@@ -165,6 +245,21 @@ public:
   /// Advances simulated time; every timer fires at its exact time.
   void advance(std::chrono::milliseconds dt) {
     fx_.advance(dt);
+  }
+
+  /// Runs every actor until no message is left; fires no timer.
+  void run() {
+    fx_.run();
+  }
+
+  /// The actor system the network runs in.
+  caf::actor_system& sys() {
+    return fx_.sys();
+  }
+
+  /// The harness the network runs in.
+  deterministic_system& harness() {
+    return fx_;
   }
 
   /// Sends a packet from module a to module b's id; returns the packet's
@@ -189,12 +284,14 @@ public:
     return loops_;
   }
 
+  /// Module i's routing counters (empty when it does not answer).
   routing_stats stats(size_t i) {
     auto res = fx_.call<routing_stats>(modules_[i].agent, atom::get_v,
                                        atom::stats_v);
     return res ? std::get<0>(*res) : routing_stats{};
   }
 
+  /// Module i's routing table, every size class.
   std::vector<route_info> routes(size_t i) {
     auto res = fx_.call<std::vector<route_info>>(modules_[i].agent,
                                                  atom::get_v, atom::routes_v);
@@ -214,15 +311,27 @@ public:
     return stats(i).self;
   }
 
+  /// Module i (valid until the next `add_module`).
   module& at(size_t i) {
     return modules_[i];
   }
 
+  /// Link li.
+  const link& link_at(size_t li) const {
+    return links_[li];
+  }
+
+  /// Number of modules.
   size_t size() const {
     return modules_.size();
   }
 
 private:
+  static std::string unique_prefix() {
+    static std::atomic<uint64_t> count{0};
+    return "testkit-sim" + std::to_string(++count);
+  }
+
   void observe(module_id self, const data_header& h, const byte_buffer& bytes) {
     auto at = header_size(h);
     if (h.protocol != 0 || bytes.size() < at + 8)
@@ -241,6 +350,7 @@ private:
   std::chrono::milliseconds hello_;
   std::vector<module> modules_;
   std::vector<link> links_;
+  std::vector<std::function<void(size_t, module&)>> start_hooks_;
   std::map<uint64_t, std::vector<module_id>> paths_;
   uint64_t next_tag_ = 1;
   size_t loops_ = 0;

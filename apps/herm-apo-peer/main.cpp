@@ -2,9 +2,9 @@
 // support) per process, for multi-process tests of APOs, proxies and topics.
 //
 //   herm-apo-peer --id 0x33 --emu /tmp/bus:can2.0:2 serve --name echo
-//   herm-apo-peer --id 0x32 --udp 127.0.0.1:41001=127.0.0.1:41000 \
+//   herm-apo-peer --id 0x32 --udp 127.0.0.1:41001=127.0.0.1:41000
 //                 --emu /tmp/bus:can2.0:1 route
-//   herm-apo-peer --id 0x31 --udp 127.0.0.1:41000=127.0.0.1:41001 \
+//   herm-apo-peer --id 0x31 --udp 127.0.0.1:41000=127.0.0.1:41001
 //                 call --name echo --count 20 --size 200
 //   herm-apo-peer --id 0x40 --emu /tmp/eth:ethernet:1 publish --topic t --count 10
 //   herm-apo-peer --id 0x41 --emu /tmp/eth:ethernet:2 subscribe --topic t --count 5

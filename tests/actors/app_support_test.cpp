@@ -609,3 +609,15 @@ TEST_F(asl_test, bad_input_is_dropped_and_counted_or_answered_with_an_error) {
   auto proxy_ok = stats(1).requests_served;
   EXPECT_EQ(proxy_ok, 1u);
 }
+
+// An APO registered the moment its module starts (before any timer ran)
+// already names its module in its reference.
+TEST_F(asl_test, an_apo_registered_at_start_up_names_its_module) {
+  net = std::make_unique<sim_network>(*this, test_prefix());
+  net->add_module(id_of(0));
+  add_app_support(*this, *net, cfg);
+  net->start();
+  auto log = std::make_shared<seen>();
+  auto ref = add(0, "early", "t", spawn_calculator(log));
+  EXPECT_EQ(ref.module, id_of(0));
+}

@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "tests/support/process.hpp"
+#include "tests/support/temp_dir.hpp"
 
 using namespace herm::test;
 using namespace std::chrono_literals;
@@ -37,25 +38,6 @@ std::string addr(uint16_t port) {
   return "127.0.0.1:" + std::to_string(port);
 }
 
-class temp_dir {
-public:
-  temp_dir() {
-    char tmpl[] = "/tmp/herm-asl-XXXXXX";
-    auto* p = ::mkdtemp(tmpl);
-    path_ = p != nullptr ? p : "";
-  }
-  ~temp_dir() {
-    std::error_code ec;
-    if (!path_.empty())
-      std::filesystem::remove_all(path_, ec);
-  }
-  const std::string& path() const {
-    return path_;
-  }
-
-private:
-  std::string path_;
-};
 
 /// The lines of `out` that start with `prefix`.
 std::vector<std::string> lines_with(const std::string& out,

@@ -101,6 +101,32 @@ public:
     return *status_;
   }
 
+  /// Like wait_for_line, for a line that contains `part` anywhere (log
+  /// lines start with a time stamp).
+  std::optional<std::string>
+  wait_for_line_containing(const std::string& part,
+                           std::chrono::milliseconds timeout) {
+    auto deadline = std::chrono::steady_clock::now() + timeout;
+    for (;;) {
+      size_t pos;
+      while ((pos = out_.find('\n', scanned_any_)) != std::string::npos) {
+        auto line = out_.substr(scanned_any_, pos - scanned_any_);
+        scanned_any_ = pos + 1;
+        if (line.find(part) != std::string::npos)
+          return line;
+      }
+      auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
+      if (left.count() <= 0 || !read_some(left))
+        return std::nullopt;
+    }
+  }
+
+  void signal(int sig) {
+    if (pid_ > 0 && !status_)
+      ::kill(pid_, sig);
+  }
+
   void terminate() {
     if (pid_ > 0 && !status_)
       ::kill(pid_, SIGTERM);
@@ -122,6 +148,8 @@ private:
   pid_t pid_ = -1;
   int fd_ = -1;
   std::string out_;
+  /// Where wait_for_line_containing goes on from.
+  size_t scanned_any_ = 0;
   std::optional<int> status_;
 };
 

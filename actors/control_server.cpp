@@ -1,0 +1,427 @@
+// The control service's local endpoint: a Unix-domain stream socket served
+// by one thread of its own (blocking I/O belongs here, never in an actor),
+// and the client side hermctl uses. One JSON request per line, one JSON
+// reply per line.
+
+#include "actors/control.hpp"
+
+#include <fcntl.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <future>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "caf/actor_system.hpp"
+#include "caf/event_based_actor.hpp"
+#include "caf/sec.hpp"
+#include "caf/send.hpp"
+
+#include "actors/runtime/error.hpp"
+
+namespace herm {
+
+namespace {
+
+using json = nlohmann::json;
+using clock_type = std::chrono::steady_clock;
+
+/// Longest request or reply line, newline excluded.
+constexpr size_t max_line = 64 * 1024;
+
+/// A client that sends nothing for this long is disconnected, so that one
+/// idle client cannot hold the endpoint.
+constexpr std::chrono::seconds client_idle{30};
+
+std::string errno_text(int err) {
+  return std::strerror(err);
+}
+
+std::string reply_error(const std::string& code, const std::string& message) {
+  return json{{"ok", false}, {"error", {{"code", code}, {"message", message}}}}
+    .dump(-1, ' ', false, json::error_handler_t::replace);
+}
+
+/// Fills `addr` for `path`; false if the path does not fit.
+bool make_address(const std::string& path, sockaddr_un& addr) {
+  std::memset(&addr, 0, sizeof(addr));
+  addr.sun_family = AF_UNIX;
+  if (path.empty() || path.size() >= sizeof(addr.sun_path))
+    return false;
+  std::memcpy(addr.sun_path, path.data(), path.size());
+  return true;
+}
+
+/// Closes a descriptor when it goes out of scope.
+struct fd_guard {
+  int fd = -1;
+  ~fd_guard() {
+    if (fd >= 0)
+      ::close(fd);
+  }
+  int release() {
+    auto x = fd;
+    fd = -1;
+    return x;
+  }
+};
+
+/// Waits until `fd` is ready for `events` or `deadline` passes; also returns
+/// (false) when `stop_fd` becomes readable.
+bool wait_ready(int fd, short events, clock_type::time_point deadline,
+                int stop_fd = -1) {
+  for (;;) {
+    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+      deadline - clock_type::now());
+    if (left.count() <= 0)
+      return false;
+    pollfd p[2] = {{fd, events, 0}, {stop_fd, POLLIN, 0}};
+    auto n = ::poll(p, stop_fd >= 0 ? 2 : 1,
+                    static_cast<int>(std::min<int64_t>(left.count(), 1000)));
+    if (n < 0 && errno != EINTR)
+      return false;
+    if (n <= 0)
+      continue;
+    if (stop_fd >= 0 && p[1].revents != 0)
+      return false;
+    if (p[0].revents != 0)
+      return true;
+  }
+}
+
+/// Writes all of `data`; false on error or when `deadline` passes.
+bool write_all(int fd, const std::string& data, clock_type::time_point deadline) {
+  size_t done = 0;
+  while (done < data.size()) {
+    auto n = ::send(fd, data.data() + done, data.size() - done,
+                    MSG_NOSIGNAL | MSG_DONTWAIT);
+    if (n > 0) {
+      done += static_cast<size_t>(n);
+      continue;
+    }
+    if (n < 0 && errno == EINTR)
+      continue;
+    if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)
+        && wait_ready(fd, POLLOUT, deadline))
+      continue;
+    return false;
+  }
+  return true;
+}
+
+class server_impl : public control_server {
+public:
+  server_impl(caf::actor_system& sys, control_actor service, std::string path,
+              local_commands locals, int listen_fd, int stop_read,
+              int stop_write, ino_t inode)
+    : sys_(sys),
+      service_(std::move(service)),
+      path_(std::move(path)),
+      locals_(std::move(locals)),
+      listen_fd_(listen_fd),
+      stop_read_(stop_read),
+      stop_write_(stop_write),
+      inode_(inode) {
+    thread_ = std::thread{[this] { run(); }};
+  }
+
+  ~server_impl() override {
+    char c = 1;
+    [[maybe_unused]] auto n = ::write(stop_write_, &c, 1);
+    if (thread_.joinable())
+      thread_.join();
+    ::close(listen_fd_);
+    ::close(stop_read_);
+    ::close(stop_write_);
+    // Remove the socket file only if it is still ours (not a successor's).
+    struct stat sb;
+    if (::lstat(path_.c_str(), &sb) == 0 && sb.st_ino == inode_)
+      ::unlink(path_.c_str());
+  }
+
+  const std::string& socket_path() const {
+    return path_;
+  }
+
+private:
+  void run() {
+    for (;;) {
+      pollfd p[2] = {{listen_fd_, POLLIN, 0}, {stop_read_, POLLIN, 0}};
+      auto n = ::poll(p, 2, -1);
+      if (n < 0 && errno == EINTR)
+        continue;
+      if (n < 0 || p[1].revents != 0)
+        return;
+      if (p[0].revents == 0)
+        continue;
+      int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
+      if (fd < 0)
+        continue;
+      serve_client(fd);
+      ::close(fd);
+    }
+  }
+
+  /// Answers every line from one client until it closes, idles or breaks
+  /// the line bound.
+  void serve_client(int fd) {
+    std::string buf;
+    for (;;) {
+      auto nl = buf.find('\n');
+      if (nl != std::string::npos) {
+        auto line = buf.substr(0, nl);
+        buf.erase(0, nl + 1);
+        if (!line.empty() && line.back() == '\r')
+          line.pop_back();
+        if (line.find_first_not_of(" \t") == std::string::npos)
+          continue;
+        if (!write_all(fd, answer(line) + '\n',
+                       clock_type::now() + std::chrono::seconds(5)))
+          return;
+        continue;
+      }
+      if (buf.size() > max_line) {
+        write_all(fd,
+                  reply_error("invalid_request",
+                              "request line longer than "
+                                + std::to_string(max_line) + " bytes")
+                    + '\n',
+                  clock_type::now() + std::chrono::seconds(5));
+        return;
+      }
+      if (!wait_ready(fd, POLLIN, clock_type::now() + client_idle, stop_read_))
+        return;
+      char chunk[4096];
+      auto n = ::recv(fd, chunk, sizeof(chunk), MSG_DONTWAIT);
+      if (n < 0 && (errno == EINTR || errno == EAGAIN))
+        continue;
+      if (n <= 0) {
+        // A last request without its newline still gets its answer.
+        if (n == 0 && buf.find_first_not_of(" \t\r") != std::string::npos
+            && buf.size() <= max_line)
+          write_all(fd, answer(buf) + '\n',
+                    clock_type::now() + std::chrono::seconds(5));
+        return;
+      }
+      buf.append(chunk, static_cast<size_t>(n));
+    }
+  }
+
+  /// One reply line for one request line; never throws.
+  std::string answer(const std::string& line) {
+    try {
+      auto req = json::parse(line, nullptr, false);
+      if (req.is_discarded() || !req.is_object())
+        return reply_error("invalid_request",
+                           "a request is one JSON object with a \"cmd\"");
+      auto cmd = req.find("cmd");
+      if (cmd != req.end() && cmd->is_string()) {
+        auto local = locals_.find(cmd->get<std::string>());
+        if (local != locals_.end() && req.count("module") == 0)
+          return local->second(line);
+      }
+      return ask_service(line);
+    } catch (const std::exception& e) {
+      return reply_error("internal", e.what());
+    }
+  }
+
+  /// Asks the service through a helper actor and waits for its answer
+  /// here, watching the stop pipe: stopping the server ends the helper and
+  /// does not wait for a slow request.
+  std::string ask_service(const std::string& line) {
+    auto result = std::make_shared<std::promise<std::string>>();
+    auto answer = result->get_future();
+    auto helper = sys_.spawn([service = service_, line, result,
+                              deadline = control_deadline(line)](
+                               caf::event_based_actor* self) {
+      self->request(service, deadline, line)
+        .then([result](std::string& r) { result->set_value(std::move(r)); },
+              [result](caf::error& err) {
+                auto timed_out
+                  = err == caf::make_error(caf::sec::request_timeout);
+                result->set_value(reply_error(
+                  timed_out ? "timeout" : "unavailable",
+                  timed_out ? "the control service did not answer in time"
+                            : "control service: " + render(err)));
+              });
+    });
+    while (answer.wait_for(std::chrono::milliseconds(0))
+           != std::future_status::ready) {
+      pollfd p{stop_read_, POLLIN, 0};
+      if (::poll(&p, 1, 50) > 0) {
+        caf::anon_send_exit(helper, caf::exit_reason::user_shutdown);
+        return reply_error("unavailable", "the control socket is closing");
+      }
+    }
+    try {
+      return answer.get();
+    } catch (const std::future_error&) {
+      // The helper ended without an answer (the actor system stops).
+      return reply_error("unavailable", "the control service is stopping");
+    }
+  }
+
+  caf::actor_system& sys_;
+  control_actor service_;
+  std::string path_;
+  local_commands locals_;
+  int listen_fd_;
+  int stop_read_;
+  int stop_write_;
+  ino_t inode_;
+  std::thread thread_;
+};
+
+/// True if something accepts connections at `path`.
+bool live_socket(const sockaddr_un& addr) {
+  fd_guard fd{::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0)};
+  if (fd.fd < 0)
+    return false;
+  return ::connect(fd.fd, reinterpret_cast<const sockaddr*>(&addr),
+                   sizeof(addr))
+         == 0;
+}
+
+} // namespace
+
+// -- control_server ------------------------------------------------------------------
+
+caf::expected<std::unique_ptr<control_server>>
+control_server::start(caf::actor_system& sys, control_actor service,
+                      std::string path, local_commands locals) {
+  namespace fs = std::filesystem;
+  sockaddr_un addr;
+  if (!make_address(path, addr))
+    return make_error(ec::invalid_parameter,
+                      "control socket '" + path + "': "
+                        + (path.empty() ? std::string{"empty path"}
+                                        : "longer than "
+                                            + std::to_string(sizeof(addr.sun_path) - 1)
+                                            + " bytes"));
+  auto fail = [&](ec code, const std::string& what, int err) {
+    return make_error(code, "control socket '" + path + "': " + what + ": "
+                              + errno_text(err));
+  };
+  // Parent directory: created private if missing.
+  auto parent = fs::path{path}.parent_path();
+  if (!parent.empty()) {
+    std::error_code fec;
+    if (!fs::exists(parent, fec)) {
+      fs::create_directories(parent, fec);
+      if (fec)
+        return make_error(ec::device_unavailable,
+                          "control socket '" + path + "': cannot create "
+                            + parent.string() + ": " + fec.message());
+      ::chmod(parent.c_str(), 0700);
+    }
+  }
+  // An existing file: a live endpoint is an error; a stale socket goes.
+  struct stat sb;
+  if (::lstat(path.c_str(), &sb) == 0) {
+    if (!S_ISSOCK(sb.st_mode))
+      return make_error(ec::already_exists, "control socket '" + path
+                                              + "': exists and is not a socket");
+    if (live_socket(addr))
+      return make_error(ec::already_exists,
+                        "control socket '" + path
+                          + "': a module is already listening there");
+    ::unlink(path.c_str());
+  }
+  fd_guard fd{::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0)};
+  if (fd.fd < 0)
+    return fail(ec::device_unavailable, "socket", errno);
+  if (::bind(fd.fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0)
+    return fail(errno == EADDRINUSE ? ec::already_exists : ec::device_unavailable,
+                "bind", errno);
+  ::chmod(path.c_str(), 0600);
+  if (::lstat(path.c_str(), &sb) != 0 || ::listen(fd.fd, 16) != 0) {
+    auto err = errno;
+    ::unlink(path.c_str());
+    return fail(ec::device_unavailable, "listen", err);
+  }
+  int pipe_fds[2];
+  if (::pipe2(pipe_fds, O_CLOEXEC) != 0) {
+    auto err = errno;
+    ::unlink(path.c_str());
+    return fail(ec::device_unavailable, "pipe", err);
+  }
+  std::unique_ptr<control_server> result{
+    new server_impl(sys, std::move(service), path, std::move(locals),
+                    fd.release(), pipe_fds[0], pipe_fds[1], sb.st_ino)};
+  return result;
+}
+
+control_server::~control_server() = default;
+
+const std::string& control_server::path() const {
+  return static_cast<const server_impl*>(this)->socket_path();
+}
+
+// -- client --------------------------------------------------------------------------
+
+caf::expected<std::string> control_call(const std::string& path,
+                                        const std::string& request,
+                                        std::chrono::milliseconds timeout) {
+  auto deadline = clock_type::now() + timeout;
+  sockaddr_un addr;
+  if (!make_address(path, addr))
+    return make_error(ec::invalid_parameter,
+                      "'" + path + "' is not a usable socket path");
+  fd_guard fd{::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0)};
+  if (fd.fd < 0)
+    return make_error(ec::device_unavailable, "socket: " + errno_text(errno));
+  if (::connect(fd.fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr))
+      != 0) {
+    auto err = errno;
+    if (err == ENOENT || err == ECONNREFUSED || err == ENOTDIR)
+      return make_error(ec::not_found, "no module listening at " + path
+                                         + " (is hermd running?)");
+    return make_error(ec::device_unavailable,
+                      "cannot connect to " + path + ": " + errno_text(err));
+  }
+  // A raw newline in JSON can only be whitespace: keep the request one line.
+  auto line = request;
+  for (auto& c : line)
+    if (c == '\n' || c == '\r')
+      c = ' ';
+  line += '\n';
+  if (!write_all(fd.fd, line, deadline))
+    return make_error(ec::device_failed,
+                      "cannot send the request to " + path + ": "
+                        + errno_text(errno));
+  std::string buf;
+  for (;;) {
+    auto nl = buf.find('\n');
+    if (nl != std::string::npos) {
+      buf.resize(nl);
+      return buf;
+    }
+    if (buf.size() > 64 * max_line)
+      return make_error(ec::invalid_parameter,
+                        "the reply from " + path + " is too long");
+    if (!wait_ready(fd.fd, POLLIN, deadline))
+      return make_error(ec::timeout, "no reply from " + path + " within "
+                                       + std::to_string(timeout.count())
+                                       + " ms");
+    char chunk[4096];
+    auto n = ::recv(fd.fd, chunk, sizeof(chunk), MSG_DONTWAIT);
+    if (n < 0 && (errno == EINTR || errno == EAGAIN))
+      continue;
+    if (n <= 0)
+      return make_error(ec::device_failed,
+                        path + " closed the connection without a reply");
+    buf.append(chunk, static_cast<size_t>(n));
+  }
+}
+
+} // namespace herm

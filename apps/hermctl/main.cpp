@@ -1,0 +1,955 @@
+// hermctl: looks into and steers a running HERM module through its control
+// socket (actors/control.hpp), and through it every module the routing
+// reaches ("--module 0x31"). Usage and sample output: "Running hermctl"
+// in docs/.
+//
+//   hermctl info                       hermctl routes --all
+//   hermctl --module 0x31 neighbors    hermctl ping 0x31 -c 5
+//   hermctl trace 0x33                 hermctl topology --svg robot.svg
+//   hermctl link can0 down             hermctl cost --bandwidth 1M --mtu 8
+//
+// Plain aligned tables for people; --json prints the reply's result as
+// JSON for scripts. Exit status: 0 success, 1 the module answered with an
+// error (unknown module, no route, unknown device, ...) or a ping got no
+// reply, 2 bad usage, 3 no module to talk to (nothing listening at the
+// socket, or no reply in time). Errors are one line on stderr.
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "actors/config.hpp"
+#include "actors/control.hpp"
+#include "actors/runtime/error.hpp"
+#include "channels/link_profile.hpp"
+#include "routing/metric.hpp"
+#include "routing/module_id.hpp"
+#include "routing/route_table.hpp"
+
+using json = nlohmann::json;
+
+namespace {
+
+enum exit_status : int {
+  exit_ok = 0,
+  exit_failed = 1,
+  exit_usage = 2,
+  exit_unreachable = 3,
+};
+
+/// Ends the command: `message` goes to stderr, `status` is the exit status.
+struct failure {
+  int status;
+  std::string message;
+};
+
+struct options {
+  std::string socket;
+  std::string name = "hermd";
+  std::string module;
+  bool json_out = false;
+  uint32_t timeout_ms = 5000;
+  bool all = false;
+  std::string target;
+  uint32_t count = 3;
+  std::string dot_file;
+  std::string svg_file;
+  std::string png_file;
+  std::string bandwidth;
+  uint32_t mtu = 0;
+  uint64_t size = 0;
+  double coef = 1.0;
+  std::string device;
+  std::string state;
+};
+
+herm::module_id parse_mid(const std::string& text) {
+  auto id = herm::parse_module_id(text);
+  if (!id || !herm::is_unicast(*id))
+    throw failure{exit_usage,
+                  "'" + text + "' is not a module id (such as 0x4E or 78)"};
+  return *id;
+}
+
+// -- talking to the module -------------------------------------------------------------
+
+class client {
+public:
+  client(std::string path, uint32_t timeout_ms)
+    : path_(std::move(path)), timeout_ms_(timeout_ms) {
+  }
+
+  /// Sends `req` (to `module`, unless no_module: the local one) and returns
+  /// the reply's result; throws a failure for an error reply or no reply.
+  json call(json req, herm::module_id module = herm::no_module) {
+    req["timeout_ms"] = timeout_ms_;
+    if (module != herm::no_module)
+      req["module"] = herm::to_hex(module);
+    auto text = req.dump();
+    auto wait = herm::control_deadline(text) + std::chrono::seconds(1);
+    auto reply = herm::control_call(path_, text, wait);
+    if (!reply)
+      throw failure{exit_unreachable, message_of(reply.error())};
+    auto j = json::parse(*reply, nullptr, false);
+    if (j.is_discarded() || !j.is_object() || !j.contains("ok"))
+      throw failure{exit_failed, "the module at " + path_
+                                   + " sent a reply that is not a control "
+                                     "reply: "
+                                   + reply->substr(0, 200)};
+    if (j["ok"] != true) {
+      auto err = j.value("error", json::object());
+      auto code = err.value("code", std::string{"error"});
+      auto msg = err.value("message", std::string{});
+      throw failure{exit_failed, msg.empty() ? code : msg + " [" + code + "]"};
+    }
+    return j.value("result", json{});
+  }
+
+private:
+  static std::string message_of(const caf::error& err) {
+    if (err.context().match_elements<std::string>())
+      return err.context().get_as<std::string>(0);
+    return herm::render(err);
+  }
+
+  std::string path_;
+  uint32_t timeout_ms_;
+};
+
+// -- formatting -------------------------------------------------------------------------
+
+/// A field as text: strings as they are, numbers as numbers, null as "-".
+std::string text(const json& v) {
+  if (v.is_null())
+    return "-";
+  if (v.is_string())
+    return v.get<std::string>();
+  if (v.is_boolean())
+    return v.get<bool>() ? "yes" : "no";
+  return v.dump();
+}
+
+std::string text(const json& obj, const char* key) {
+  auto i = obj.find(key);
+  return i == obj.end() ? "-" : text(*i);
+}
+
+std::string cost_text(const json& v) {
+  return v.is_null() ? "inf" : text(v);
+}
+
+std::string number(double x) {
+  std::ostringstream out;
+  out << x;
+  return out.str();
+}
+
+std::string bandwidth_text(uint64_t bps) {
+  if (bps >= 1'000'000'000 && bps % 100'000'000 == 0)
+    return number(double(bps) / 1e9) + " Gbit/s";
+  if (bps >= 1'000'000)
+    return number(double(bps) / 1e6) + " Mbit/s";
+  if (bps >= 1'000)
+    return number(double(bps) / 1e3) + " kbit/s";
+  return std::to_string(bps) + " bit/s";
+}
+
+std::string duration_text(uint64_t ms) {
+  auto s = ms / 1000;
+  std::ostringstream out;
+  if (s >= 86400)
+    out << s / 86400 << "d ";
+  if (s >= 3600)
+    out << (s % 86400) / 3600 << "h ";
+  if (s >= 60)
+    out << (s % 3600) / 60 << "m ";
+  out << s % 60 << "s";
+  return out.str();
+}
+
+/// Columns separated by two spaces, each as wide as its widest cell.
+void print_table(const std::vector<std::string>& header,
+                 const std::vector<std::vector<std::string>>& rows) {
+  std::vector<size_t> width(header.size(), 0);
+  auto measure = [&](const std::vector<std::string>& row) {
+    for (size_t i = 0; i < row.size() && i < width.size(); ++i)
+      width[i] = std::max(width[i], row[i].size());
+  };
+  measure(header);
+  for (auto& r : rows)
+    measure(r);
+  auto print = [&](const std::vector<std::string>& row) {
+    std::string line;
+    for (size_t i = 0; i < row.size() && i < width.size(); ++i) {
+      line += row[i];
+      if (i + 1 < row.size())
+        line += std::string(width[i] - row[i].size() + 2, ' ');
+    }
+    std::cout << line << '\n';
+  };
+  print(header);
+  for (auto& r : rows)
+    print(r);
+}
+
+/// "key  value" lines, keys aligned, indented by `indent`.
+void print_pairs(const std::vector<std::pair<std::string, std::string>>& pairs,
+                 const std::string& indent = "") {
+  size_t w = 0;
+  for (auto& kv : pairs)
+    w = std::max(w, kv.first.size());
+  for (auto& kv : pairs)
+    std::cout << indent << kv.first << std::string(w - kv.first.size() + 2, ' ')
+              << kv.second << '\n';
+}
+
+void print_json(const json& j) {
+  std::cout << j.dump(2, ' ', false, json::error_handler_t::replace) << '\n';
+}
+
+uint32_t mid_number(const json& v) {
+  if (!v.is_string())
+    return 0x10000;
+  auto id = herm::parse_module_id(v.get<std::string>());
+  return id ? *id : 0x10000;
+}
+
+// -- commands ---------------------------------------------------------------------------
+
+int cmd_info(client& c, const options& o, herm::module_id m) {
+  auto r = c.call({{"cmd", "info"}}, m);
+  if (o.json_out) {
+    print_json(r);
+    return exit_ok;
+  }
+  auto inst = r.value("instance", uint64_t{0});
+  std::ostringstream instance;
+  instance << "0x" << std::hex << inst;
+  auto apps = r.value("apps", json::object());
+  auto channels = r.value("channels", json::object());
+  print_pairs({
+    {"module", text(r, "name") + " (" + text(r, "module") + ")"},
+    {"instance", instance.str()},
+    {"uptime", duration_text(r.value("uptime_ms", uint64_t{0}))},
+    {"routing", text(r, "reachable") + " modules reachable, "
+                  + text(r, "neighbours") + " neighbours"},
+    {"channels", text(channels, "up") + " up of " + text(channels, "total")},
+    {"apps", text(apps, "local") + " local, " + text(apps, "known_remote")
+               + " known remote, " + text(apps, "bindings") + " bindings"},
+    {"control", r.value("registered", std::string{}) == "yes"
+                  ? std::string{"registered as herm.control"}
+                  : "not registered: " + text(r, "registered")},
+  });
+  return exit_ok;
+}
+
+int cmd_channels(client& c, const options& o, herm::module_id m) {
+  auto r = c.call({{"cmd", "channels"}}, m);
+  if (o.json_out) {
+    print_json(r);
+    return exit_ok;
+  }
+  std::vector<std::vector<std::string>> rows;
+  std::vector<std::string> notes;
+  for (auto& ch : r) {
+    auto p = ch.value("profile", json::object());
+    auto s = ch.value("stats", json{});
+    auto stat = [&](const char* k) { return s.is_object() ? text(s, k) : "-"; };
+    std::string dropped = "-";
+    if (s.is_object())
+      dropped = std::to_string(s.value("tx_dropped", uint64_t{0})
+                               + s.value("rx_malformed", uint64_t{0})
+                               + s.value("rx_reassembly_dropped", uint64_t{0}));
+    auto bps = p.value("bandwidth_bps", uint64_t{0});
+    rows.push_back({text(ch, "id"), text(ch, "device"), text(ch, "kind"),
+                    text(ch, "address"), text(ch, "state"), text(p, "name"),
+                    bps > 0 ? bandwidth_text(bps) : "-", text(p, "mtu"),
+                    cost_text(p.value("cost", json{})), stat("tx_packets"),
+                    stat("tx_bytes"), stat("rx_packets"), stat("rx_bytes"),
+                    dropped});
+    auto err = ch.value("last_error", std::string{});
+    if (!err.empty())
+      notes.push_back("channel " + text(ch, "id") + " (" + text(ch, "state")
+                      + "): " + err);
+  }
+  print_table({"ID", "DEVICE", "KIND", "ADDRESS", "STATE", "PROFILE",
+               "BANDWIDTH", "MTU", "COST", "TX PKTS", "TX BYTES", "RX PKTS",
+               "RX BYTES", "DROPPED"},
+              rows);
+  for (auto& n : notes)
+    std::cout << n << '\n';
+  return exit_ok;
+}
+
+std::string neighbour_text(const json& row) {
+  auto mod = row.value("neighbour_module", json{});
+  if (mod.is_string())
+    return mod.get<std::string>() + " (link " + text(row, "neighbour") + ")";
+  return "link " + text(row, "neighbour");
+}
+
+/// The routes to show: selected ones of class 0, or every row with `all`;
+/// by destination, class, selected first.
+json route_rows(const json& routes, bool all) {
+  std::vector<json> rows;
+  for (auto& r : routes)
+    if (all || (r.value("selected", false) && r.value("size_class", 0) == 0))
+      rows.push_back(r);
+  std::stable_sort(rows.begin(), rows.end(), [](const json& a, const json& b) {
+    auto ka = std::make_tuple(mid_number(a["destination"]),
+                              a.value("size_class", 0),
+                              !a.value("selected", false));
+    auto kb = std::make_tuple(mid_number(b["destination"]),
+                              b.value("size_class", 0),
+                              !b.value("selected", false));
+    return ka < kb;
+  });
+  return json(rows);
+}
+
+int cmd_routes(client& c, const options& o, herm::module_id m) {
+  auto rows = route_rows(c.call({{"cmd", "routes"}, {"all", o.all}}, m), o.all);
+  if (o.json_out) {
+    print_json(rows);
+    return exit_ok;
+  }
+  std::vector<std::vector<std::string>> out;
+  for (auto& r : rows) {
+    std::vector<std::string> line{text(r, "destination")};
+    if (o.all)
+      line.push_back(text(r, "size_class") + " (" + text(r, "size_class_bytes")
+                     + " B)");
+    line.insert(line.end(),
+                {text(r, "channel"), neighbour_text(r),
+                 cost_text(r.value("cost", json{})), text(r, "hops"),
+                 r.value("forwarding", std::string{}).empty()
+                   ? std::string{"-"}
+                   : text(r, "forwarding")});
+    if (o.all) {
+      line.push_back(text(r, "selected"));
+      line.push_back(text(r, "feasible"));
+    }
+    out.push_back(std::move(line));
+  }
+  if (o.all)
+    print_table({"DESTINATION", "CLASS", "NEXT CHANNEL", "NEIGHBOUR", "COST",
+                 "HOPS", "FORWARDING", "SELECTED", "FEASIBLE"},
+                out);
+  else
+    print_table({"DESTINATION", "NEXT CHANNEL", "NEIGHBOUR", "COST", "HOPS",
+                 "FORWARDING"},
+                out);
+  return exit_ok;
+}
+
+int cmd_neighbors(client& c, const options& o, herm::module_id m) {
+  auto r = c.call({{"cmd", "neighbors"}}, m);
+  if (o.json_out) {
+    print_json(r);
+    return exit_ok;
+  }
+  std::vector<std::vector<std::string>> rows;
+  for (auto& n : r) {
+    auto cost = n.value("cost", json::array());
+    rows.push_back({text(n, "module"), text(n, "channel"),
+                    text(n, "link_address"), text(n, "link_kind"),
+                    cost.empty() ? "-" : cost_text(cost[0]),
+                    text(n, "last_heard_ms") + " ms"});
+  }
+  std::sort(rows.begin(), rows.end());
+  print_table({"MODULE", "CHANNEL", "LINK ADDRESS", "LINK", "COST",
+               "LAST HEARD"},
+              rows);
+  return exit_ok;
+}
+
+int cmd_apps(client& c, const options& o, herm::module_id m) {
+  auto r = c.call({{"cmd", "apps"}}, m);
+  if (o.json_out) {
+    print_json(r);
+    return exit_ok;
+  }
+  std::vector<std::vector<std::string>> rows;
+  for (auto& a : r) {
+    bool local = a.value("local", false);
+    rows.push_back(
+      {text(a, "module"), text(a, "apo"), text(a, "name"), text(a, "type"),
+       local ? "local" : "remote",
+       local ? "watched by " + text(a, "watchers") + " modules"
+             : "heard " + number(a.value("age_ms", 0) / 1000.0) + " s ago"});
+  }
+  print_table({"MODULE", "APO", "NAME", "TYPE", "WHERE", "STATE"}, rows);
+  return exit_ok;
+}
+
+int cmd_stats(client& c, const options& o, herm::module_id m) {
+  auto r = c.call({{"cmd", "stats"}}, m);
+  if (o.json_out) {
+    print_json(r);
+    return exit_ok;
+  }
+  auto section = [](const std::string& title, const json& obj) {
+    std::cout << title << '\n';
+    std::vector<std::pair<std::string, std::string>> pairs;
+    for (auto& [k, v] : obj.items())
+      if (k != "id" && k != "device" && k != "state")
+        pairs.emplace_back(k, text(v));
+    print_pairs(pairs, "  ");
+  };
+  section("routing", r.value("routing", json::object()));
+  section("apps", r.value("apps", json::object()));
+  for (auto& ch : r.value("channels", json::array()))
+    section("channel " + text(ch, "id") + " (" + text(ch, "device") + ", "
+              + text(ch, "state") + ")",
+            ch);
+  return exit_ok;
+}
+
+int cmd_ping(client& c, const options& o) {
+  auto target = parse_mid(o.target);
+  if (o.count == 0)
+    throw failure{exit_usage, "-c must be at least 1"};
+  auto r = c.call({{"cmd", "ping"},
+                   {"module", herm::to_hex(target)},
+                   {"count", o.count}});
+  if (o.json_out) {
+    print_json(r);
+    return r.value("received", 0) > 0 ? exit_ok : exit_failed;
+  }
+  std::cout << "PING " << herm::to_hex(target) << ": " << o.count
+            << " echoes to its control service\n";
+  auto rtts = r.value("rtt_us", json::array());
+  for (size_t i = 0; i < rtts.size(); ++i)
+    std::cout << "echo " << i + 1 << ": " << text(rtts[i]) << " us\n";
+  std::cout << text(r, "count") << " sent, " << text(r, "received")
+            << " received, " << text(r, "lost") << " lost";
+  if (!rtts.empty())
+    std::cout << "; rtt min/avg/max = " << text(r, "min_us") << "/"
+              << text(r, "avg_us") << "/" << text(r, "max_us") << " us";
+  std::cout << '\n';
+  return rtts.empty() ? exit_failed : exit_ok;
+}
+
+/// One hop of a trace.
+struct hop {
+  herm::module_id id;
+  std::string name;
+  std::string link = "-";
+  std::string channel = "-";
+  std::string cost = "0";
+  std::string rtt = "-";
+};
+
+int cmd_trace(client& c, const options& o) {
+  auto dst = parse_mid(o.target);
+  auto me = c.call({{"cmd", "echo"}});
+  auto self_id = herm::module_id(me.value("id", 0));
+  std::vector<hop> hops{{self_id, me.value("name", std::string{})}};
+  std::set<herm::module_id> visited{self_id};
+  auto current = self_id;
+  uint64_t cost = 0;
+  bool cost_known = true;
+  json trace = json::array();
+  trace.push_back({{"module", herm::to_hex(self_id)},
+                   {"name", hops[0].name},
+                   {"cost", 0}});
+  while (current != dst) {
+    if (hops.size() > herm::max_route_hops)
+      throw failure{exit_failed, "no end after " + std::to_string(herm::max_route_hops)
+                                   + " hops"};
+    auto at = current == self_id ? herm::no_module : current;
+    auto routes = c.call({{"cmd", "routes"}, {"all", false}}, at);
+    json route;
+    for (auto& r : routes)
+      if (mid_number(r["destination"]) == dst && r.value("selected", false)
+          && r.value("size_class", 0) == 0)
+        route = r;
+    if (route.is_null())
+      throw failure{exit_failed, "no route from " + herm::to_hex(current)
+                                   + " to " + herm::to_hex(dst)};
+    auto next_text = route.value("neighbour_module", json{});
+    auto next = next_text.is_string()
+                  ? herm::parse_module_id(next_text.get<std::string>())
+                  : std::nullopt;
+    if (!next)
+      throw failure{exit_failed, herm::to_hex(current)
+                                   + " routes to " + herm::to_hex(dst)
+                                   + " through an unknown neighbour (link "
+                                   + text(route, "neighbour") + ")"};
+    if (visited.count(*next) > 0)
+      throw failure{exit_failed, "routing loop: " + herm::to_hex(*next)
+                                   + " seen twice on the way to "
+                                   + herm::to_hex(dst)};
+    visited.insert(*next);
+    auto link_cost = route.value("link_cost", json{});
+    if (link_cost.is_number())
+      cost += link_cost.get<uint64_t>();
+    else
+      cost_known = false;
+    hop h{*next, "", text(route, "link_kind"), text(route, "channel"),
+          cost_known ? std::to_string(cost) : "?"};
+    json jh{{"module", herm::to_hex(*next)},
+            {"link_kind", route.value("link_kind", json{})},
+            {"channel", route.value("channel", json{})},
+            {"cost", cost_known ? json(cost) : json(nullptr)}};
+    try {
+      h.name = c.call({{"cmd", "echo"}}, *next).value("name", std::string{});
+      auto p = c.call({{"cmd", "ping"}, {"module", herm::to_hex(*next)},
+                       {"count", 1}});
+      h.rtt = text(p, "avg_us") + " us";
+      jh["rtt_us"] = p.value("avg_us", json{});
+    } catch (const failure& f) {
+      if (f.status == exit_unreachable)
+        throw;
+      h.rtt = "*";
+      jh["rtt_us"] = nullptr;
+    }
+    jh["name"] = h.name;
+    trace.push_back(std::move(jh));
+    hops.push_back(std::move(h));
+    current = *next;
+  }
+  if (o.json_out) {
+    print_json(trace);
+    return exit_ok;
+  }
+  std::cout << "trace to " << herm::to_hex(dst) << ": " << hops.size() - 1
+            << " hops\n";
+  std::vector<std::vector<std::string>> rows;
+  for (size_t i = 0; i < hops.size(); ++i)
+    rows.push_back({std::to_string(i), herm::to_hex(hops[i].id),
+                    hops[i].name.empty() ? "-" : hops[i].name, hops[i].link,
+                    hops[i].channel, hops[i].cost, hops[i].rtt});
+  print_table({"HOP", "MODULE", "NAME", "LINK", "VIA CHANNEL", "COST", "RTT"},
+              rows);
+  return exit_ok;
+}
+
+std::string dot_escape(const std::string& s) {
+  std::string out;
+  for (char ch : s) {
+    if (ch == '"' || ch == '\\')
+      out += '\\';
+    if (ch == '\n')
+      continue;
+    out += ch;
+  }
+  return out;
+}
+
+/// True if `dot` (graphviz) is an executable on PATH.
+bool have_dot() {
+  auto* path = std::getenv("PATH");
+  if (path == nullptr)
+    return false;
+  std::istringstream dirs{path};
+  for (std::string dir; std::getline(dirs, dir, ':');)
+    if (!dir.empty() && ::access((dir + "/dot").c_str(), X_OK) == 0)
+      return true;
+  return false;
+}
+
+/// Runs `dot -T<format> -o file` with `graph` on its stdin.
+void render_dot(const std::string& graph, const std::string& format,
+                const std::string& file) {
+  int fds[2];
+  if (::pipe(fds) != 0)
+    throw failure{exit_failed, "cannot run dot: pipe failed"};
+  auto pid = ::fork();
+  if (pid < 0)
+    throw failure{exit_failed, "cannot run dot: fork failed"};
+  if (pid == 0) {
+    ::dup2(fds[0], STDIN_FILENO);
+    ::close(fds[0]);
+    ::close(fds[1]);
+    auto fmt = "-T" + format;
+    ::execlp("dot", "dot", fmt.c_str(), "-o", file.c_str(),
+             static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ::close(fds[0]);
+  size_t done = 0;
+  while (done < graph.size()) {
+    auto n = ::write(fds[1], graph.data() + done, graph.size() - done);
+    if (n <= 0)
+      break;
+    done += static_cast<size_t>(n);
+  }
+  ::close(fds[1]);
+  int st = 0;
+  ::waitpid(pid, &st, 0);
+  if (!WIFEXITED(st) || WEXITSTATUS(st) != 0)
+    throw failure{exit_failed, "dot -T" + format + " failed writing " + file};
+}
+
+int cmd_topology(client& c, const options& o) {
+  auto me = c.call({{"cmd", "echo"}});
+  auto self_id = herm::module_id(me.value("id", 0));
+  std::set<herm::module_id> modules{self_id};
+  for (auto& r : c.call({{"cmd", "routes"}, {"all", false}}))
+    if (r.value("selected", false) && r.value("size_class", 0) == 0)
+      if (auto id = mid_number(r["destination"]); id <= 0xFFFF)
+        modules.insert(static_cast<herm::module_id>(id));
+  std::map<herm::module_id, std::string> names;
+  names[self_id] = me.value("name", std::string{});
+  // One edge per pair of modules and link kind, with its class-0 cost.
+  std::map<std::tuple<herm::module_id, herm::module_id, std::string>, json>
+    edges;
+  for (auto id : modules) {
+    auto at = id == self_id ? herm::no_module : id;
+    try {
+      if (id != self_id)
+        names[id] = c.call({{"cmd", "echo"}}, at).value("name", std::string{});
+      for (auto& n : c.call({{"cmd", "neighbors"}}, at)) {
+        auto other = mid_number(n["module"]);
+        if (other > 0xFFFF)
+          continue;
+        auto a = std::min<herm::module_id>(id, static_cast<herm::module_id>(other));
+        auto b = std::max<herm::module_id>(id, static_cast<herm::module_id>(other));
+        auto cost = n.value("cost", json::array());
+        edges[{a, b, n.value("link_kind", std::string{"?"})}]
+          = cost.empty() ? json(nullptr) : cost[0];
+        names.emplace(static_cast<herm::module_id>(other), "");
+      }
+    } catch (const failure& f) {
+      if (f.status == exit_unreachable)
+        throw;
+      std::cerr << "hermctl: " << herm::to_hex(id) << ": " << f.message << '\n';
+      names.emplace(id, "");
+    }
+  }
+  if (o.json_out) {
+    json j{{"nodes", json::array()}, {"edges", json::array()}};
+    for (auto& [id, name] : names)
+      j["nodes"].push_back({{"module", herm::to_hex(id)}, {"name", name}});
+    for (auto& [key, cost] : edges)
+      j["edges"].push_back({{"a", herm::to_hex(std::get<0>(key))},
+                            {"b", herm::to_hex(std::get<1>(key))},
+                            {"link_kind", std::get<2>(key)},
+                            {"cost", cost}});
+    print_json(j);
+    return exit_ok;
+  }
+  std::ostringstream dot;
+  dot << "graph herm {\n  node [shape=box];\n";
+  for (auto& [id, name] : names) {
+    dot << "  \"" << herm::to_hex(id) << "\" [label=\"" << herm::to_hex(id);
+    if (!name.empty())
+      dot << "\\n" << dot_escape(name);
+    dot << "\"];\n";
+  }
+  for (auto& [key, cost] : edges)
+    dot << "  \"" << herm::to_hex(std::get<0>(key)) << "\" -- \""
+        << herm::to_hex(std::get<1>(key)) << "\" [label=\""
+        << dot_escape(std::get<2>(key)) << " " << cost_text(cost) << "\"];\n";
+  dot << "}\n";
+  auto graph = dot.str();
+  if (o.dot_file.empty() && o.svg_file.empty() && o.png_file.empty()) {
+    std::cout << graph;
+    return exit_ok;
+  }
+  auto summary = " (" + std::to_string(names.size()) + " modules, "
+                 + std::to_string(edges.size()) + " links)";
+  if (!o.dot_file.empty()) {
+    std::ofstream out{o.dot_file};
+    out << graph;
+    if (!out)
+      throw failure{exit_failed, "cannot write " + o.dot_file};
+    std::cout << "wrote " << o.dot_file << summary << '\n';
+  }
+  for (auto& [file, format] : {std::pair{o.svg_file, std::string{"svg"}},
+                               std::pair{o.png_file, std::string{"png"}}}) {
+    if (file.empty())
+      continue;
+    if (!have_dot())
+      throw failure{exit_failed, "cannot render " + file
+                                   + ": graphviz's 'dot' is not on PATH "
+                                     "(install graphviz, or write --dot FILE "
+                                     "and render it elsewhere)"};
+    render_dot(graph, format, file);
+    std::cout << "wrote " << file << summary << '\n';
+  }
+  return exit_ok;
+}
+
+int cmd_profiles(const options& o) {
+  json j = json::array();
+  std::vector<std::vector<std::string>> rows;
+  for (auto& p : herm::builtin_profiles()) {
+    auto cost = herm::link_cost(p);
+    j.push_back({{"name", p.name},
+                 {"bandwidth_bps", p.bandwidth_bps},
+                 {"mtu", p.mtu},
+                 {"multi_access", p.multi_access},
+                 {"cost", cost}});
+    rows.push_back({p.name, bandwidth_text(p.bandwidth_bps),
+                    std::to_string(p.mtu), std::to_string(cost),
+                    p.multi_access ? "bus" : "point-to-point"});
+  }
+  if (o.json_out)
+    print_json(j);
+  else
+    print_table({"NAME", "BANDWIDTH", "MTU", "COST", "ACCESS"}, rows);
+  return exit_ok;
+}
+
+/// "1000000", "1M", "12Mbit", "19.2k", "400M", "1.5G" (bit/s).
+uint64_t parse_bandwidth(const std::string& s) {
+  size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(s, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  auto unit = s.substr(used);
+  for (auto suffix : {"bit/s", "bps", "bit", "b/s"})
+    if (unit.size() >= std::strlen(suffix)
+        && unit.compare(unit.size() - std::strlen(suffix), std::string::npos,
+                        suffix)
+             == 0) {
+      unit.resize(unit.size() - std::strlen(suffix));
+      break;
+    }
+  double scale = 0;
+  if (unit.empty())
+    scale = 1;
+  else if (unit == "k" || unit == "K")
+    scale = 1e3;
+  else if (unit == "M")
+    scale = 1e6;
+  else if (unit == "G")
+    scale = 1e9;
+  if (used == 0 || scale == 0 || !(x > 0) || x * scale > 1e15)
+    throw failure{exit_usage, "--bandwidth '" + s
+                                + "' is not a bit rate (such as 1000000, 1M, "
+                                  "19.2k)"};
+  return static_cast<uint64_t>(std::llround(x * scale));
+}
+
+int cmd_cost(const options& o) {
+  auto bps = parse_bandwidth(o.bandwidth);
+  if (!(o.coef > 0))
+    throw failure{exit_usage, "--coef must be above 0"};
+  if (o.size > 0 && o.mtu == 0)
+    throw failure{exit_usage, "--size needs --mtu (frames are ceil(size / mtu))"};
+  herm::link_profile p{"custom", bps, o.mtu, false, o.coef, 0};
+  auto cost = herm::link_cost(bps, o.coef);
+  json j{{"bandwidth_bps", bps}, {"delay_coef", o.coef}, {"link_cost", cost}};
+  std::vector<std::pair<std::string, std::string>> pairs{
+    {"bandwidth", bandwidth_text(bps)},
+    {"coefficient", number(o.coef)},
+    {"link cost", std::to_string(cost)}};
+  if (o.mtu > 0) {
+    j["mtu"] = o.mtu;
+    pairs.emplace_back("mtu", std::to_string(o.mtu) + " bytes");
+    auto size = o.size > 0 ? o.size : uint64_t{o.mtu};
+    auto frames = (size + o.mtu - 1) / o.mtu;
+    auto mc = herm::message_cost(p, size);
+    j["size"] = size;
+    j["frames"] = frames;
+    j["message_cost"] = mc;
+    pairs.emplace_back("message size", std::to_string(size) + " bytes = "
+                                         + std::to_string(frames) + " frames");
+    pairs.emplace_back("message cost", std::to_string(mc));
+    auto classes = herm::link_metrics(p);
+    std::string per_class;
+    j["class_costs"] = json::array();
+    for (size_t k = 0; k < herm::size_classes; ++k) {
+      j["class_costs"].push_back(classes[k] == herm::infinite_metric
+                                   ? json(nullptr)
+                                   : json(classes[k]));
+      if (!per_class.empty())
+        per_class += ", ";
+      per_class += std::to_string(herm::size_class_bytes[k]) + " B: "
+                   + cost_text(classes[k] == herm::infinite_metric
+                                 ? json(nullptr)
+                                 : json(classes[k]));
+    }
+    pairs.emplace_back("size classes", per_class);
+  }
+  if (o.json_out)
+    print_json(j);
+  else
+    print_pairs(pairs);
+  return exit_ok;
+}
+
+int cmd_link(client& c, const options& o, herm::module_id m) {
+  if (o.state != "up" && o.state != "down")
+    throw failure{exit_usage, "link state must be 'up' or 'down', got '"
+                                + o.state + "'"};
+  auto r = c.call({{"cmd", "link"}, {"device", o.device}, {"state", o.state}},
+                  m);
+  if (o.json_out) {
+    print_json(r);
+    return exit_ok;
+  }
+  auto ids = [](const json& a) {
+    std::string s;
+    for (auto& x : a)
+      s += (s.empty() ? "" : ", ") + text(x);
+    return s;
+  };
+  if (o.state == "down") {
+    auto closed = r.value("closed", json::array());
+    std::cout << o.device << ": down"
+              << (closed.empty() ? std::string{" (no channel was open)"}
+                                 : " (closed channel " + ids(closed) + ")")
+              << '\n';
+  } else {
+    auto chans = r.value("channels", json::array());
+    std::cout << o.device << ": "
+              << (r.value("opened", false) ? "up (opened channel "
+                                           : "already up (channel ")
+              << ids(chans) << ")\n";
+  }
+  return exit_ok;
+}
+
+int cmd_reload(client& c, const options& o, herm::module_id m) {
+  auto r = c.call({{"cmd", "reload"}}, m);
+  if (o.json_out) {
+    print_json(r);
+    return exit_ok;
+  }
+  std::cout << "reloaded\n";
+  if (r.is_object()) {
+    std::vector<std::pair<std::string, std::string>> pairs;
+    for (auto& [k, v] : r.items())
+      pairs.emplace_back(k, v.is_array() || v.is_object() ? v.dump() : text(v));
+    print_pairs(pairs, "  ");
+  } else if (!r.is_null()) {
+    std::cout << "  " << text(r) << '\n';
+  }
+  return exit_ok;
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+  options o;
+  CLI::App app{"hermctl: inspect and steer HERM modules through a module's "
+               "control socket"};
+  app.fallthrough();
+  app.require_subcommand(1);
+  auto* socket_opt = app.add_option("-s,--socket", o.socket,
+                                    "control socket (default: $HERM_CONTROL, "
+                                    "else the default socket of --name)");
+  app.add_option("--name", o.name, "module name whose default socket to use "
+                                   "(default: hermd)")
+    ->excludes(socket_opt);
+  app.add_option("--module", o.module,
+                 "run the command on this module (0x4E or 78), through the "
+                 "local one");
+  app.add_flag("--json", o.json_out, "print the result as JSON");
+  app.add_option("--timeout", o.timeout_ms,
+                 "milliseconds to wait for each answer (default 5000)")
+    ->check(CLI::Range(1u, 600000u));
+  auto* info = app.add_subcommand("info", "module name, id, uptime, summary");
+  auto* channels = app.add_subcommand("channels",
+                                      "the Channel Table with counters");
+  auto* routes = app.add_subcommand("routes", "the routing table");
+  routes->add_flag("--all", o.all,
+                   "every size class and every route, not only selected ones");
+  auto* neighbors = app.add_subcommand("neighbors", "neighbour modules");
+  neighbors->alias("neighbours");
+  auto* apps = app.add_subcommand("apps", "application objects, local and "
+                                          "discovered");
+  auto* stats = app.add_subcommand("stats", "every counter");
+  auto* ping = app.add_subcommand("ping", "round-trip times to a module's "
+                                          "control service");
+  ping->add_option("MID", o.target, "module id")->required();
+  ping->add_option("-c,--count", o.count, "echoes (default 3)");
+  auto* trace = app.add_subcommand("trace", "the path to a module, hop by hop");
+  trace->add_option("MID", o.target, "module id")->required();
+  auto* topology = app.add_subcommand("topology", "every reachable module and "
+                                                  "link as a graph");
+  topology->add_option("--dot", o.dot_file, "write the DOT graph to FILE");
+  topology->add_option("--svg", o.svg_file, "render to FILE with graphviz");
+  topology->add_option("--png", o.png_file, "render to FILE with graphviz");
+  auto* profiles = app.add_subcommand("profiles", "the built-in link profiles "
+                                                  "(Table 1)");
+  auto* cost = app.add_subcommand("cost", "link and message cost of a link");
+  cost->add_option("--bandwidth", o.bandwidth, "bit/s: 1000000, 1M, 19.2k")
+    ->required();
+  cost->add_option("--mtu", o.mtu, "frame payload, bytes");
+  cost->add_option("--size", o.size, "message size, bytes");
+  cost->add_option("--coef", o.coef, "delay coefficient c (default 1)");
+  auto* link = app.add_subcommand("link", "take a device's channels down or "
+                                          "bring them up");
+  link->add_option("DEVICE", o.device, "device name")->required();
+  link->add_option("STATE", o.state, "up or down")->required();
+  auto* reload = app.add_subcommand("reload", "make hermd re-read its "
+                                              "configuration");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    auto status = app.exit(e);
+    return status == 0 ? exit_ok : exit_usage;
+  }
+  try {
+    if (profiles->parsed())
+      return cmd_profiles(o);
+    if (cost->parsed())
+      return cmd_cost(o);
+    auto module = herm::no_module;
+    if (!o.module.empty()) {
+      if (ping->parsed() || trace->parsed() || topology->parsed())
+        throw failure{exit_usage, "--module does not apply to ping, trace and "
+                                  "topology: they start at the local module"};
+      module = parse_mid(o.module);
+    }
+    std::string path = o.socket;
+    if (path.empty()) {
+      auto* env = std::getenv("HERM_CONTROL");
+      bool named = app.count("--name") > 0;
+      path = env != nullptr && *env != '\0' && !named ? env
+                                                      : herm::default_control_socket(o.name);
+    }
+    client c{path, o.timeout_ms};
+    if (info->parsed())
+      return cmd_info(c, o, module);
+    if (channels->parsed())
+      return cmd_channels(c, o, module);
+    if (routes->parsed())
+      return cmd_routes(c, o, module);
+    if (neighbors->parsed())
+      return cmd_neighbors(c, o, module);
+    if (apps->parsed())
+      return cmd_apps(c, o, module);
+    if (stats->parsed())
+      return cmd_stats(c, o, module);
+    if (ping->parsed())
+      return cmd_ping(c, o);
+    if (trace->parsed())
+      return cmd_trace(c, o);
+    if (topology->parsed())
+      return cmd_topology(c, o);
+    if (link->parsed())
+      return cmd_link(c, o, module);
+    if (reload->parsed())
+      return cmd_reload(c, o, module);
+    return exit_usage;
+  } catch (const failure& f) {
+    std::cout.flush();
+    std::cerr << "hermctl: " << f.message << '\n';
+    return f.status;
+  }
+}

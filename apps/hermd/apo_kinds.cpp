@@ -1,0 +1,443 @@
+#include "apps/hermd/apo_kinds.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+
+#include <spdlog/spdlog.h>
+
+#include "caf/actor_system.hpp"
+#include "caf/actor_system_config.hpp"
+#include "caf/event_based_actor.hpp"
+#include "caf/send.hpp"
+#include "caf/stateful_actor.hpp"
+
+#include "actors/runtime/error.hpp"
+#include "apps/hermd/testbed_types.hpp"
+#include "routing/module_id.hpp"
+
+namespace herm::hermd {
+
+namespace {
+
+using namespace std::chrono_literals;
+
+// -- options ---------------------------------------------------------------------
+
+/// "apos[NAME] (robot.yaml:14): option 'period_ms' expects ..."
+std::string where(const apo_config& cfg) {
+  return "APO '" + cfg.name + "'" + (cfg.line > 0 ? " (line " + std::to_string(cfg.line) + ")" : "");
+}
+
+caf::expected<uint64_t> u64_option(const apo_config& cfg, const std::string& key,
+                                   uint64_t fallback, uint64_t min, uint64_t max) {
+  auto i = cfg.options.find(key);
+  if (i == cfg.options.end())
+    return fallback;
+  char* end = nullptr;
+  errno = 0;
+  auto v = std::strtoull(i->second.c_str(), &end, 10);
+  if (i->second.empty() || *end != '\0' || errno != 0 || v < min || v > max)
+    return make_error(ec::invalid_config,
+                      where(cfg) + ": option '" + key + "' expects an integer in ["
+                        + std::to_string(min) + ", " + std::to_string(max)
+                        + "], got '" + i->second + "'");
+  return v;
+}
+
+std::string str_option(const apo_config& cfg, const std::string& key,
+                       std::string fallback = "") {
+  auto i = cfg.options.find(key);
+  return i == cfg.options.end() ? fallback : i->second;
+}
+
+/// Refuses options a kind does not read (typos).
+caf::error only_options(const apo_config& cfg, std::vector<std::string> known) {
+  for (auto& kv : cfg.options)
+    if (std::find(known.begin(), known.end(), kv.first) == known.end()) {
+      std::string list;
+      for (auto& k : known)
+        list += (list.empty() ? "" : ", ") + k;
+      return make_error(ec::invalid_config,
+                        where(cfg) + ": unknown option '" + kv.first
+                          + "' for kind '" + cfg.kind + "' (known: "
+                          + (list.empty() ? "none" : list) + ")");
+    }
+  return caf::none;
+}
+
+// -- binding to a remote APO -----------------------------------------------------
+
+/// A binding by name that survives its target's restarts (rebind).
+struct binding {
+  caf::actor proxy;
+  bool pending = false;
+};
+
+template <class Self>
+void ensure_bound(Self* self, binding& b, const app_support_actor& apps,
+                  const std::string& target) {
+  if (b.proxy || b.pending)
+    return;
+  b.pending = true;
+  self->request(apps, 5s, atom::bind_v,
+                bind_request{query_by::name, target, 1000, true})
+    .then(
+      [self, &b, target](caf::actor& proxy) {
+        b.pending = false;
+        b.proxy = proxy;
+        spdlog::info("bound to APO '{}'", target);
+      },
+      [&b, target](caf::error& err) {
+        b.pending = false;
+        spdlog::debug("binding to '{}' not yet possible: {}", target,
+                      render(err));
+      });
+}
+
+// -- collector ---------------------------------------------------------------------
+
+struct collector_state {
+  static inline const char* name = "herm.apo.collector";
+  uint64_t batches = 0;
+  uint64_t frames = 0;
+};
+
+caf::behavior collector(caf::stateful_actor<collector_state>* self) {
+  return {
+    [self](const sonar_batch& b) -> uint32_t {
+      ++self->state.batches;
+      auto [lo, hi] = std::minmax_element(b.distances_mm.begin(),
+                                          b.distances_mm.end());
+      spdlog::info("collector: sonar batch {} from {}: {} readings (seq {}..), "
+                   "{}..{} mm",
+                   b.batch, b.source, b.distances_mm.size(), b.first_seq,
+                   b.distances_mm.empty() ? 0 : *lo,
+                   b.distances_mm.empty() ? 0 : *hi);
+      return b.batch;
+    },
+    [self](const vision_frame& f) -> uint32_t {
+      ++self->state.frames;
+      spdlog::info("collector: vision frame {} from {}: {} bytes", f.seq,
+                   f.source, f.data.size());
+      return f.seq;
+    },
+  };
+}
+
+// -- srf04_batcher -------------------------------------------------------------------
+
+struct sonar_options {
+  std::string device;
+  uint64_t baud = 9600;
+  uint64_t batch = 10;
+  std::string target = "collector";
+};
+
+struct sonar_state {
+  static inline const char* name = "herm.apo.srf04_batcher";
+  sonar_options opt;
+  apo_context ctx;
+  std::string apo_name;
+  std::vector<uint16_t> readings;
+  uint32_t first_seq = 0;
+  uint32_t batches = 0;
+  uint64_t malformed = 0;
+  channel_actor line;
+  binding target;
+};
+
+using sonar_actor = caf::stateful_actor<sonar_state>;
+
+caf::expected<sonar_options> sonar_opts(const apo_config& cfg) {
+  if (auto err = only_options(cfg, {"device", "baud", "batch", "target"}))
+    return err;
+  sonar_options o;
+  o.device = str_option(cfg, "device");
+  if (o.device.empty())
+    return make_error(ec::invalid_config,
+                      where(cfg) + ": option 'device' (the serial line to the "
+                                   "SRF04 board) is required");
+  auto baud = u64_option(cfg, "baud", 9600, 50, 4000000);
+  auto batch = u64_option(cfg, "batch", 10, 1, 1000);
+  if (!baud)
+    return baud.error();
+  if (!batch)
+    return batch.error();
+  o.baud = *baud;
+  o.batch = *batch;
+  o.target = str_option(cfg, "target", "collector");
+  return o;
+}
+
+void open_sensor_line(sonar_actor* self);
+
+void retry_sensor_line(sonar_actor* self) {
+  self->delayed_send(self, 1s, atom::retry_v);
+}
+
+void open_sensor_line(sonar_actor* self) {
+  auto& st = self->state;
+  auto dev_name = "sonar:" + st.apo_name;
+  device_config dev{dev_name, "serial", st.opt.device,
+                    {{"baud", std::to_string(st.opt.baud)}}};
+  auto io = st.ctx.module.io;
+  // Forget an earlier attempt's device (absent the first time).
+  self->request(io, 5s, atom::close_v, dev_name).then([] {}, [](caf::error&) {});
+  self->request(io, 5s, atom::add_v, dev)
+    .then(
+      [self, io, dev_name](device_info&) {
+        self->request(io, 5s, atom::open_v,
+                      channel_request{dev_name, "*", false, true})
+          .then(
+            [self](channel_actor& ch, channel_info& info) {
+              self->state.line = ch;
+              self->request(ch, 5s, atom::subscribe_v,
+                            caf::actor_cast<channel_reader_actor>(self))
+                .then([](channel_info&) {}, [](caf::error&) {});
+              spdlog::info("{}: reading the SRF04 board on {} ({} baud, MTU {})",
+                           self->state.apo_name, self->state.opt.device,
+                           self->state.opt.baud, info.profile.mtu);
+            },
+            [self](caf::error& err) {
+              spdlog::warn("{}: cannot open the sensor line: {}",
+                           self->state.apo_name, render(err));
+              retry_sensor_line(self);
+            });
+      },
+      [self](caf::error& err) {
+        spdlog::warn("{}: cannot open the sensor line: {}", self->state.apo_name,
+                     render(err));
+        retry_sensor_line(self);
+      });
+}
+
+void send_batch(sonar_actor* self) {
+  auto& st = self->state;
+  sonar_batch b{st.ctx.module_name, ++st.batches, st.first_seq, std::move(st.readings)};
+  st.readings.clear();
+  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target);
+  if (!st.target.proxy) {
+    spdlog::warn("{}: sonar batch {} dropped: '{}' not bound yet", st.apo_name,
+                 b.batch, st.opt.target);
+    return;
+  }
+  auto t0 = std::chrono::steady_clock::now();
+  auto n = b.batch;
+  spdlog::info("{}: sonar batch {} ({} readings) -> '{}'", st.apo_name, n,
+               b.distances_mm.size(), st.opt.target);
+  self->request(st.target.proxy, 10s, std::move(b))
+    .then(
+      [self, n, t0](uint32_t) {
+        auto us = std::chrono::duration_cast<std::chrono::microseconds>(
+                    std::chrono::steady_clock::now() - t0)
+                    .count();
+        spdlog::info("{}: sonar batch {} acknowledged ({:.1f} ms)",
+                     self->state.apo_name, n, us / 1000.0);
+      },
+      [self, n](caf::error& err) {
+        spdlog::warn("{}: sonar batch {} failed: {}", self->state.apo_name, n,
+                     render(err));
+      });
+}
+
+caf::behavior srf04_batcher(sonar_actor* self, apo_context ctx,
+                            sonar_options opt, std::string apo_name) {
+  auto& st = self->state;
+  st.ctx = std::move(ctx);
+  st.opt = std::move(opt);
+  st.apo_name = std::move(apo_name);
+  self->set_down_handler([self](caf::down_msg& msg) {
+    if (msg.source == self->state.line.address()) {
+      spdlog::warn("{}: sensor line ended: {}", self->state.apo_name,
+                   render(msg.reason));
+      self->state.line = nullptr;
+      retry_sensor_line(self);
+    }
+  });
+  self->attach_functor([io = st.ctx.module.io, dev = "sonar:" + st.apo_name] {
+    caf::anon_send(io, atom::close_v, dev);
+  });
+  open_sensor_line(self);
+  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target);
+  return {
+    [self](packet_received& pkt) {
+      auto& s = self->state;
+      auto r = decode_srf04(pkt.bytes.data(), pkt.bytes.size());
+      if (!r) {
+        ++s.malformed;
+        spdlog::warn("{}: dropped a malformed reading ({} so far): {}",
+                     s.apo_name, s.malformed, render(r.error()));
+        return;
+      }
+      if (s.readings.empty())
+        s.first_seq = r->seq;
+      s.readings.push_back(r->distance_mm);
+      spdlog::debug("{}: SRF04 reading {}: {} mm ({} us)", s.apo_name, r->seq,
+                    r->distance_mm, r->echo_us);
+      if (s.readings.size() >= s.opt.batch)
+        send_batch(self);
+    },
+    [](link_event&) {},
+    [self](atom::retry) {
+      if (!self->state.line)
+        open_sensor_line(self);
+    },
+  };
+}
+
+// -- vision_source -------------------------------------------------------------------
+
+struct vision_options {
+  uint64_t period_ms = 60000;
+  uint64_t bytes = 100;
+  std::string target = "collector";
+};
+
+struct vision_state {
+  static inline const char* name = "herm.apo.vision_source";
+  vision_options opt;
+  apo_context ctx;
+  std::string apo_name;
+  uint32_t seq = 0;
+  binding target;
+};
+
+using vision_actor = caf::stateful_actor<vision_state>;
+
+caf::expected<vision_options> vision_opts(const apo_config& cfg) {
+  if (auto err = only_options(cfg, {"period_ms", "bytes", "target"}))
+    return err;
+  vision_options o;
+  auto period = u64_option(cfg, "period_ms", 60000, 1, 86400000);
+  auto bytes = u64_option(cfg, "bytes", 100, 0, 60000);
+  if (!period)
+    return period.error();
+  if (!bytes)
+    return bytes.error();
+  o.period_ms = *period;
+  o.bytes = *bytes;
+  o.target = str_option(cfg, "target", "collector");
+  return o;
+}
+
+caf::behavior vision_source(vision_actor* self, apo_context ctx,
+                            vision_options opt, std::string apo_name) {
+  auto& init = self->state;
+  init.ctx = std::move(ctx);
+  init.opt = std::move(opt);
+  init.apo_name = std::move(apo_name);
+  ensure_bound(self, init.target, init.ctx.module.apps, init.opt.target);
+  self->delayed_send(self, std::chrono::milliseconds(init.opt.period_ms),
+                     atom::tick_v);
+  return {
+    [self](atom::tick) {
+      auto& st = self->state;
+      self->delayed_send(self, std::chrono::milliseconds(st.opt.period_ms),
+                         atom::tick_v);
+      auto seq = ++st.seq;
+      ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target);
+      if (!st.target.proxy) {
+        spdlog::warn("{}: vision frame {} dropped: '{}' not bound yet",
+                     st.apo_name, seq, st.opt.target);
+        return;
+      }
+      vision_frame f{st.ctx.module_name, seq, std::vector<uint8_t>(st.opt.bytes)};
+      for (size_t i = 0; i < f.data.size(); ++i)
+        f.data[i] = static_cast<uint8_t>(seq + i);
+      auto t0 = std::chrono::steady_clock::now();
+      spdlog::info("{}: vision frame {} ({} bytes) -> '{}'", st.apo_name, seq,
+                   f.data.size(), st.opt.target);
+      self->request(st.target.proxy, std::chrono::milliseconds(st.opt.period_ms),
+                    std::move(f))
+        .then(
+          [self, seq, t0](uint32_t) {
+            auto us = std::chrono::duration_cast<std::chrono::microseconds>(
+                        std::chrono::steady_clock::now() - t0)
+                        .count();
+            spdlog::info("{}: vision frame {} acknowledged ({:.1f} ms)",
+                         self->state.apo_name, seq, us / 1000.0);
+          },
+          [self, seq](caf::error& err) {
+            spdlog::warn("{}: vision frame {} failed: {}", self->state.apo_name,
+                         seq, render(err));
+          });
+    },
+  };
+}
+
+// -- echo --------------------------------------------------------------------------
+
+caf::behavior echo(caf::event_based_actor*) {
+  return {
+    [](caf::message& msg) -> caf::message { return std::move(msg); },
+  };
+}
+
+// -- the registry ------------------------------------------------------------------
+
+std::vector<apo_kind> make_kinds() {
+  std::vector<apo_kind> kinds;
+  kinds.push_back(
+    {"collector",
+     "receives sonar batches and vision frames and acknowledges each (the "
+     "main controller's APO)",
+     [](const apo_config& cfg) { return only_options(cfg, {}); },
+     [](const apo_context& ctx, const apo_config&) -> caf::expected<caf::actor> {
+       return ctx.sys->spawn(collector);
+     }});
+  kinds.push_back(
+    {"srf04_batcher",
+     "reads an SRF04 ultrasonic board on a serial line (options: device, baud, "
+     "batch, target) and sends every `batch` readings to the APO `target`",
+     [](const apo_config& cfg) -> caf::error {
+       auto o = sonar_opts(cfg);
+       return o ? caf::error{} : o.error();
+     },
+     [](const apo_context& ctx, const apo_config& cfg) -> caf::expected<caf::actor> {
+       auto o = sonar_opts(cfg);
+       if (!o)
+         return o.error();
+       return ctx.sys->spawn(srf04_batcher, ctx, *o, cfg.name);
+     }});
+  kinds.push_back(
+    {"vision_source",
+     "sends `bytes` bytes of vision data every `period_ms` to the APO `target`",
+     [](const apo_config& cfg) -> caf::error {
+       auto o = vision_opts(cfg);
+       return o ? caf::error{} : o.error();
+     },
+     [](const apo_context& ctx, const apo_config& cfg) -> caf::expected<caf::actor> {
+       auto o = vision_opts(cfg);
+       if (!o)
+         return o.error();
+       return ctx.sys->spawn(vision_source, ctx, *o, cfg.name);
+     }});
+  kinds.push_back({"echo", "answers every request with the request itself",
+                   [](const apo_config& cfg) { return only_options(cfg, {}); },
+                   [](const apo_context& ctx,
+                      const apo_config&) -> caf::expected<caf::actor> {
+                     return ctx.sys->spawn(echo);
+                   }});
+  return kinds;
+}
+
+} // namespace
+
+const std::vector<apo_kind>& apo_kinds() {
+  static const auto kinds = make_kinds();
+  return kinds;
+}
+
+const apo_kind* find_apo_kind(const std::string& name) {
+  for (auto& k : apo_kinds())
+    if (k.name == name)
+      return &k;
+  return nullptr;
+}
+
+void add_apo_types(caf::actor_system_config& cfg) {
+  cfg.add_message_types<caf::id_block::herm_apos>();
+}
+
+} // namespace herm::hermd

@@ -1,0 +1,593 @@
+// herm-testbed: the HERM paper's experiment (section 5, Figures 5 and 6) as
+// real processes on this machine, with a readable trace.
+//
+// Four modules, each a hermd process: sensor (0x40), main controller
+// (0x4E), vision (0x30) and mobile (0x50, the router module). Links:
+// RS232C sensor--main (a paced pseudo-terminal cable at 19,200 baud),
+// IEEE 1394a vision--mobile (emulated medium), Ethernet mobile--main (UDP on
+// loopback) and a CAN 2.0 bus main--mobile--sensor (the emulated bus; this
+// machine's kernel has no CAN). An emulated AVR board with an SRF04 sensor
+// (herm-avr-srf04) sends a reading every 30 s on its own serial line to the
+// sensor module, whose local APO sends every ten to the main controller's
+// collector; vision sends 100 bytes every 60 s through mobile. Periods are
+// divided by --time-scale so that the scenario runs in seconds.
+//
+// Then it kills mobile (vision's data fails, routes are withdrawn), restarts
+// it (everything resumes), takes the Ethernet link down (traffic moves to
+// the CAN path) and up again, and stops every module cleanly (goodbyes).
+// Each expected event is checked and printed as "EVENT ok NAME: ..." or
+// "EVENT FAILED NAME: ..."; the exit status is 0 when all were seen.
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "channels/testing/loopback.hpp"
+#include "channels/testing/null_modem.hpp"
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using clock_type = std::chrono::steady_clock;
+
+namespace {
+
+// -- child processes -----------------------------------------------------------------
+
+struct child {
+  std::string name;
+  std::vector<std::string> argv;
+  pid_t pid = -1;
+  int fd = -1;
+  std::string partial;
+  /// Every line it printed, over all its lives.
+  std::vector<std::string> lines;
+};
+
+class testbed {
+public:
+  testbed(std::string bin_dir, bool quiet)
+    : bin_(std::move(bin_dir)), quiet_(quiet), start_(clock_type::now()) {
+    // nop
+  }
+
+  ~testbed() {
+    for (auto& [name, c] : children_)
+      if (c.pid > 0) {
+        ::kill(c.pid, SIGKILL);
+        ::waitpid(c.pid, nullptr, 0);
+      }
+  }
+
+  std::string bin(const std::string& name) const {
+    return bin_ + "/" + name;
+  }
+
+  void spawn(const std::string& name, std::vector<std::string> argv) {
+    auto& c = children_[name];
+    c.name = name;
+    c.argv = std::move(argv);
+    start(c);
+  }
+
+  void restart(const std::string& name) {
+    start(children_.at(name));
+  }
+
+  void signal(const std::string& name, int sig) {
+    auto& c = children_.at(name);
+    if (c.pid > 0)
+      ::kill(c.pid, sig);
+  }
+
+  /// Waits for `name` to exit after a signal; returns its status or -1.
+  int reap(const std::string& name, std::chrono::milliseconds timeout) {
+    auto& c = children_.at(name);
+    auto deadline = clock_type::now() + timeout;
+    while (c.pid > 0 && clock_type::now() < deadline) {
+      int status = 0;
+      if (::waitpid(c.pid, &status, WNOHANG) == c.pid) {
+        pump(50ms);
+        c.pid = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      pump(20ms);
+    }
+    return -1;
+  }
+
+  /// Reads every child's output for `dt`, printing it as a trace.
+  void pump(std::chrono::milliseconds dt) {
+    auto deadline = clock_type::now() + dt;
+    do {
+      std::vector<pollfd> fds;
+      std::vector<child*> owners;
+      for (auto& [name, c] : children_)
+        if (c.fd >= 0) {
+          fds.push_back({c.fd, POLLIN, 0});
+          owners.push_back(&c);
+        }
+      auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - clock_type::now());
+      if (fds.empty()) {
+        std::this_thread::sleep_for(std::max(left, 0ms));
+        return;
+      }
+      if (::poll(fds.data(), fds.size(), static_cast<int>(std::max<int64_t>(left.count(), 0))) <= 0)
+        continue;
+      for (size_t i = 0; i < fds.size(); ++i) {
+        if ((fds[i].revents & (POLLIN | POLLHUP)) == 0)
+          continue;
+        char buf[4096];
+        auto n = ::read(fds[i].fd, buf, sizeof(buf));
+        auto& c = *owners[i];
+        if (n <= 0) {
+          ::close(c.fd);
+          c.fd = -1;
+          continue;
+        }
+        c.partial.append(buf, static_cast<size_t>(n));
+        size_t pos;
+        while ((pos = c.partial.find('\n')) != std::string::npos) {
+          auto line = c.partial.substr(0, pos);
+          c.partial.erase(0, pos + 1);
+          c.lines.push_back(line);
+          print(c.name, line);
+        }
+      }
+    } while (clock_type::now() < deadline);
+  }
+
+  /// Pumps until `pred` holds for some line `name` printed after `from`
+  /// (an index into its lines); returns that line.
+  std::optional<std::string>
+  wait_line(const std::string& name, size_t from,
+            const std::function<bool(const std::string&)>& pred,
+            std::chrono::milliseconds timeout) {
+    auto deadline = clock_type::now() + timeout;
+    auto& c = children_.at(name);
+    size_t i = from;
+    for (;;) {
+      for (; i < c.lines.size(); ++i)
+        if (pred(c.lines[i]))
+          return c.lines[i];
+      if (clock_type::now() >= deadline)
+        return std::nullopt;
+      pump(20ms);
+    }
+  }
+
+  const std::string& line(const std::string& name, size_t i) const {
+    return children_.at(name).lines.at(i);
+  }
+
+  size_t mark(const std::string& name) const {
+    return children_.at(name).lines.size();
+  }
+
+  /// Runs a command to completion (hermctl), printing its output.
+  std::pair<int, std::string> run(const std::vector<std::string>& argv,
+                                  bool show = true) {
+    std::string cmd;
+    for (auto& a : argv)
+      cmd += "'" + a + "' ";
+    cmd += "2>&1";
+    std::string out;
+    auto* p = ::popen(cmd.c_str(), "r");
+    if (p == nullptr)
+      return {-1, "popen failed"};
+    char buf[4096];
+    size_t n;
+    while ((n = std::fread(buf, 1, sizeof(buf), p)) > 0)
+      out.append(buf, n);
+    auto status = ::pclose(p);
+    if (show) {
+      std::istringstream in{out};
+      for (std::string line; std::getline(in, line);)
+        std::cout << "           | " << line << "\n";
+      std::cout << std::flush;
+    }
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+  }
+
+  void say(const std::string& text) {
+    std::cout << "\n" << stamp() << " == " << text << "\n" << std::flush;
+  }
+
+  void event(bool ok, const std::string& name, const std::string& detail) {
+    std::cout << stamp() << " EVENT " << (ok ? "ok " : "FAILED ") << name
+              << ": " << detail << "\n"
+              << std::flush;
+    if (!ok)
+      ++failed_;
+    ++events_;
+  }
+
+  int failed() const {
+    return failed_;
+  }
+
+  int events() const {
+    return events_;
+  }
+
+private:
+  std::string stamp() const {
+    char buf[32];
+    auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                clock_type::now() - start_)
+                .count();
+    std::snprintf(buf, sizeof(buf), "%7.3f", ms / 1000.0);
+    return buf;
+  }
+
+  void print(const std::string& name, const std::string& line) {
+    if (quiet_ && line.find("packet ") != std::string::npos)
+      return;
+    char head[48];
+    std::snprintf(head, sizeof(head), "%s %-7s| ", stamp().c_str(),
+                  name.c_str());
+    std::cout << head << line << "\n" << std::flush;
+  }
+
+  void start(child& c) {
+    int fds[2];
+    if (::pipe2(fds, O_CLOEXEC) != 0)
+      return;
+    c.pid = ::fork();
+    if (c.pid == 0) {
+      ::dup2(fds[1], STDOUT_FILENO);
+      ::dup2(fds[1], STDERR_FILENO);
+      std::vector<char*> args;
+      for (auto& a : c.argv)
+        args.push_back(a.data());
+      args.push_back(nullptr);
+      ::execv(args[0], args.data());
+      ::_exit(127);
+    }
+    ::close(fds[1]);
+    if (c.fd >= 0)
+      ::close(c.fd);
+    c.fd = fds[0];
+    c.partial.clear();
+  }
+
+  std::string bin_;
+  bool quiet_;
+  clock_type::time_point start_;
+  std::map<std::string, child> children_;
+  int failed_ = 0;
+  int events_ = 0;
+};
+
+bool has(const std::string& line, const std::string& what) {
+  return line.find(what) != std::string::npos;
+}
+
+std::string exe_dir() {
+  std::error_code ec;
+  auto p = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string{"."} : p.parent_path().string();
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"herm-testbed: the HERM paper's testbed as real processes"};
+  double scale = 100;
+  std::string out_dir;
+  bool quiet = false;
+  app.add_option("--time-scale", scale,
+                 "divide the paper's periods (30 s, 60 s) by this")
+    ->check(CLI::Range(1.0, 10000.0));
+  app.add_option("--out", out_dir,
+                 "write the configs and the topology picture here "
+                 "(default: a new directory under /tmp)");
+  app.add_flag("--quiet", quiet, "leave out the per-packet trace");
+  CLI11_PARSE(app, argc, argv);
+  std::signal(SIGPIPE, SIG_IGN);
+
+  // -- the work directory -------------------------------------------------------------
+  if (out_dir.empty()) {
+    char tmpl[] = "/tmp/herm-testbed-XXXXXX";
+    auto* p = ::mkdtemp(tmpl);
+    if (p == nullptr) {
+      std::cerr << "herm-testbed: cannot create a temporary directory\n";
+      return 2;
+    }
+    out_dir = p;
+  }
+  fs::create_directories(out_dir);
+  out_dir = fs::absolute(out_dir).string();
+  auto sonar_period = static_cast<uint64_t>(30000 / scale);
+  auto vision_period = static_cast<uint64_t>(60000 / scale);
+  // Routing timers scale too, within reason: repair within a couple of
+  // hundred milliseconds keeps the demonstration short.
+  auto hello = std::clamp<uint64_t>(static_cast<uint64_t>(1000 / scale * 20), 100, 1000);
+
+  // -- cables and media -------------------------------------------------------------------
+  std::string err;
+  herm::test::null_modem::config rs232;
+  rs232.baud = 19200;
+  auto cable = herm::test::null_modem::open(rs232, err);
+  herm::test::null_modem::config avr_line;
+  avr_line.baud = 9600;
+  auto avr_cable = herm::test::null_modem::open(avr_line, err);
+  if (!cable || !avr_cable) {
+    std::cerr << "herm-testbed: no pseudo-terminals: " << err << "\n";
+    return 2;
+  }
+  auto p_main = herm::test::free_udp_port();
+  auto p_mobile = herm::test::free_udp_port();
+  auto media = out_dir + "/media";
+  fs::create_directories(media);
+
+  auto write = [&](const std::string& name, const std::string& yaml) {
+    std::ofstream f{out_dir + "/" + name + ".yaml"};
+    f << yaml;
+    return out_dir + "/" + name + ".yaml";
+  };
+  auto head = [&](const std::string& name, const std::string& id) {
+    return "# The paper's " + name + " module (herm-testbed writes this file).\n"
+           "module:\n  name: " + name + "\n  id: " + id
+           + "\n  hello_interval_ms: " + std::to_string(hello)
+           + "\nlog:\n  level: debug\ncontrol:\n  socket: " + out_dir + "/"
+           + name + ".sock\n";
+  };
+  auto lo = [](uint16_t p) { return "127.0.0.1:" + std::to_string(p); };
+  auto main_cfg = write("main", head("main", "main_controller") + R"(channels:
+  - name: rs0          # RS232C to the sensor module
+    kind: serial
+    interface: )" + cable->path_b() + R"(
+    baud: 19200
+  - name: eth0         # Ethernet to the mobile module
+    kind: udp
+    interface: )" + lo(p_main) + R"(
+    peers: )" + lo(p_mobile) + R"(
+  - name: can0         # the CAN bus (emulated: no CAN in this kernel)
+    kind: can
+    interface: emu:)" + media + R"(/can
+    node: 1
+apos:
+  - name: collector
+    kind: collector
+)");
+  auto sensor_cfg = write("sensor", head("sensor", "sensor") + R"(channels:
+  - name: rs0
+    kind: serial
+    interface: )" + cable->path_a() + R"(
+    baud: 19200
+  - name: can0
+    kind: can
+    interface: emu:)" + media + R"(/can
+    node: 3
+apos:
+  - name: sonar        # reads the SRF04 board, sends ten readings at a time
+    kind: srf04_batcher
+    options:
+      device: )" + avr_cable->path_b() + R"(
+      baud: 9600
+      batch: 10
+      target: collector
+)");
+  auto mobile_cfg = write("mobile", head("mobile", "mobile") + R"(channels:
+  - name: eth0
+    kind: udp
+    interface: )" + lo(p_mobile) + R"(
+    peers: )" + lo(p_main) + R"(
+  - name: fw0          # IEEE 1394a to the vision module (emulated)
+    kind: emu
+    interface: )" + media + R"(/fw
+    profile: ieee1394a
+    station: 2
+  - name: can0
+    kind: can
+    interface: emu:)" + media + R"(/can
+    node: 2
+)");
+  auto vision_cfg = write("vision", head("vision", "vision") + R"(channels:
+  - name: fw0
+    kind: emu
+    interface: )" + media + R"(/fw
+    profile: ieee1394a
+    station: 1
+apos:
+  - name: camera
+    kind: vision_source
+    options:
+      period_ms: )" + std::to_string(vision_period) + R"(
+      bytes: 100
+      target: collector
+)");
+
+  testbed tb{exe_dir(), quiet};
+  auto hermd = tb.bin("hermd");
+  auto hermctl = tb.bin("hermctl");
+  auto sock = [&](const std::string& m) { return out_dir + "/" + m + ".sock"; };
+  auto ctl = [&](const std::string& m, std::vector<std::string> args,
+                 bool show = true) {
+    std::vector<std::string> cmd{hermctl, "-s", sock(m)};
+    cmd.insert(cmd.end(), args.begin(), args.end());
+    return tb.run(cmd, show);
+  };
+
+  std::cout << "HERM testbed (paper, section 5): configs, logs and pictures in "
+            << out_dir << "\n"
+            << "  time scale 1/" << scale << ": a reading every "
+            << sonar_period << " ms, vision data every " << vision_period
+            << " ms, hello every " << hello << " ms\n"
+            << "  RS232C cable " << cable->path_a() << " <-> "
+            << cable->path_b() << " at 19,200 baud; SRF04 line "
+            << avr_cable->path_a() << " <-> " << avr_cable->path_b() << "\n";
+
+  // -- 1. start ---------------------------------------------------------------------------
+  tb.say("starting four modules and the SRF04 board");
+  for (auto& [name, cfg] : std::vector<std::pair<std::string, std::string>>{
+         {"main", main_cfg}, {"mobile", mobile_cfg}, {"vision", vision_cfg},
+         {"sensor", sensor_cfg}}) {
+    auto [status, out] = tb.run({hermd, "--check", cfg}, false);
+    if (status != 0) {
+      std::cerr << "herm-testbed: " << out;
+      return 2;
+    }
+    tb.spawn(name, {hermd, cfg});
+  }
+  tb.spawn("avr", {tb.bin("herm-avr-srf04"), "--device", avr_cable->path_a(),
+                   "--baud", "9600", "--period-ms",
+                   std::to_string(sonar_period)});
+  auto long_wait = std::chrono::milliseconds(std::max<uint64_t>(20000, sonar_period * 25));
+  bool routes = true;
+  for (auto id : {"0x40", "0x50", "0x30"}) {
+    auto line = tb.wait_line("main", 0, [&](const std::string& l) {
+      return has(l, std::string{"route to "} + id + ":");
+    }, 15s);
+    routes = routes && line.has_value();
+  }
+  tb.event(routes, "routes_converged",
+           "the main controller has routes to sensor 0x40, mobile 0x50 and vision 0x30");
+  tb.pump(std::chrono::milliseconds(hello * 3));
+  tb.say("the main controller's routing table (size class 0, the paper's columns)");
+  ctl("main", {"routes"});
+  tb.say("the topology, as the main controller sees it");
+  auto [topo_status, topo_out] = ctl("main", {"topology", "--dot", out_dir + "/topology.dot",
+                                              "--svg", out_dir + "/topology.svg",
+                                              "--png", out_dir + "/topology.png"});
+  tb.event(topo_status == 0 && fs::exists(out_dir + "/topology.dot"),
+           "topology_written", out_dir + "/topology.dot (and .svg, .png with graphviz)");
+
+  // -- 2. steady state ------------------------------------------------------------------
+  tb.say("steady state: sonar batches over RS232C, vision data through mobile");
+  auto batch = tb.wait_line("main", 0, [](const std::string& l) {
+    return has(l, "collector: sonar batch");
+  }, long_wait);
+  tb.event(batch.has_value(), "sonar_batch_received",
+           batch ? *batch : "no sonar batch reached the collector");
+  // The packet that carried the batch: the first one the sensor module
+  // sent to the main controller after its APO sent the batch.
+  auto sent = tb.wait_line("sensor", 0, [](const std::string& l) {
+    return has(l, "sonar: sonar batch") && has(l, "-> 'collector'");
+  }, 1s);
+  size_t after = 0;
+  if (sent)
+    for (size_t i = 0; i < tb.mark("sensor"); ++i)
+      if (tb.line("sensor", i) == *sent)
+        after = i;
+  auto rs = tb.wait_line("sensor", after, [](const std::string& l) {
+    return has(l, "packet 0x40->0x4E") && has(l, "via rs232c") && has(l, "fragmented");
+  }, 1s);
+  tb.event(rs.has_value(), "sonar_batch_fragmented_on_rs232c",
+           rs ? *rs : "no fragmented RS232C packet from the sensor module");
+  auto fwd = tb.wait_line("mobile", 0, [](const std::string& l) {
+    return has(l, "packet 0x30->0x4E") && has(l, "forwarded via ethernet");
+  }, 10s);
+  tb.event(fwd.has_value(), "vision_routed_through_mobile",
+           fwd ? *fwd : "mobile forwarded no vision packet over Ethernet");
+  auto frame = tb.wait_line("main", 0, [](const std::string& l) {
+    return has(l, "collector: vision frame");
+  }, 10s);
+  tb.event(frame.has_value(), "vision_frame_received",
+           frame ? *frame : "no vision frame reached the collector");
+
+  // -- 3. mobile dies -----------------------------------------------------------------------
+  tb.say("killing the mobile module (SIGKILL: no goodbye)");
+  auto m_main = tb.mark("main");
+  auto m_vision = tb.mark("vision");
+  tb.signal("mobile", SIGKILL);
+  tb.reap("mobile", 5s);
+  auto withdrawn = tb.wait_line("main", m_main, [](const std::string& l) {
+    return has(l, "route to 0x30 withdrawn");
+  }, 10s);
+  tb.event(withdrawn.has_value(), "routes_withdrawn",
+           withdrawn ? *withdrawn : "main kept its route to vision");
+  auto failing = tb.wait_line("vision", m_vision, [](const std::string& l) {
+    return has(l, "vision frame") && has(l, "failed");
+  }, 10s);
+  tb.event(failing.has_value(), "vision_fails_without_mobile",
+           failing ? *failing : "vision saw no failure");
+  tb.say("restarting the mobile module");
+  m_main = tb.mark("main");
+  tb.restart("mobile");
+  auto resumed = tb.wait_line("main", m_main, [](const std::string& l) {
+    return has(l, "collector: vision frame");
+  }, 20s);
+  tb.event(resumed.has_value(), "vision_resumes",
+           resumed ? *resumed : "vision data did not come back");
+
+  // -- 4. Ethernet down -----------------------------------------------------------------------
+  tb.say("taking mobile's Ethernet link down: traffic moves to the CAN bus");
+  auto m_mobile = tb.mark("mobile");
+  m_main = tb.mark("main");
+  ctl("mobile", {"link", "eth0", "down"});
+  auto via_can = tb.wait_line("mobile", m_mobile, [](const std::string& l) {
+    return has(l, "packet 0x30->0x4E") && has(l, "forwarded via can2.0");
+  }, 20s);
+  tb.event(via_can.has_value(), "traffic_moves_to_can",
+           via_can ? *via_can : "mobile did not forward vision data over CAN");
+  auto over_can = tb.wait_line("main", m_main, [](const std::string& l) {
+    return has(l, "collector: vision frame");
+  }, 20s);
+  tb.event(over_can.has_value(), "vision_over_can_received",
+           over_can ? *over_can : "no vision frame arrived over CAN");
+  tb.say("main's routes now");
+  ctl("main", {"routes"});
+  tb.say("bringing Ethernet back");
+  m_mobile = tb.mark("mobile");
+  ctl("mobile", {"link", "eth0", "up"});
+  auto back = tb.wait_line("mobile", m_mobile, [](const std::string& l) {
+    return has(l, "packet 0x30->0x4E") && has(l, "forwarded via ethernet");
+  }, 20s);
+  tb.event(back.has_value(), "traffic_returns_to_ethernet",
+           back ? *back : "traffic stayed on CAN");
+
+  // -- 5. clean stop ----------------------------------------------------------------------------
+  tb.say("stopping the sensor module cleanly (SIGTERM: a goodbye on every link)");
+  m_main = tb.mark("main");
+  tb.signal("sensor", SIGTERM);
+  auto sensor_status = tb.reap("sensor", 10s);
+  auto gone = tb.wait_line("main", m_main, [](const std::string& l) {
+    return has(l, "route to 0x40 withdrawn");
+  }, 5s);
+  auto [st, stats] = ctl("main", {"stats", "--json"}, false);
+  bool goodbye = stats.find("\"rx_goodbyes\":0") == std::string::npos
+                 && stats.find("rx_goodbyes") != std::string::npos;
+  tb.event(sensor_status == 0 && gone.has_value() && goodbye,
+           "clean_shutdown_withdraws_at_once",
+           "sensor exited " + std::to_string(sensor_status)
+             + (goodbye ? ", main counted its goodbye" : ", no goodbye counted")
+             + (gone ? ", " + *gone : ""));
+  tb.say("main's channels and counters");
+  ctl("main", {"channels"});
+  for (auto name : {"vision", "mobile", "main", "avr"}) {
+    tb.signal(name, SIGTERM);
+    tb.reap(name, 10s);
+  }
+  std::cout << "\n" << (tb.failed() == 0 ? "all " : "")
+            << tb.events() - tb.failed() << " of " << tb.events()
+            << " events seen; configs, topology.dot/.svg/.png in " << out_dir
+            << "\n";
+  // The configs and pictures stay for the reader; the media were only the
+  // emulated links' meeting points.
+  std::error_code ec;
+  fs::remove_all(media, ec);
+  return tb.failed() == 0 ? 0 : 1;
+}
