@@ -25,6 +25,7 @@
 
 #include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/pattern_formatter.h>
 #include <spdlog/spdlog.h>
 
 #include "caf/actor_system.hpp"
@@ -91,14 +92,48 @@ std::vector<std::string> origins(const file_config& cfg) {
 
 // -- logs --------------------------------------------------------------------------
 
+/// `%*` in a pattern: the message as the inside of a JSON string.
+class json_message : public spdlog::custom_flag_formatter {
+public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&,
+              spdlog::memory_buf_t& dest) override {
+    for (char c : msg.payload) {
+      switch (c) {
+        case '"':
+          dest.append(std::string_view{"\\\""});
+          break;
+        case '\\':
+          dest.append(std::string_view{"\\\\"});
+          break;
+        default:
+          if (static_cast<unsigned char>(c) < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof(buf), "\\u%04x", c);
+            dest.append(std::string_view{buf});
+          } else {
+            dest.push_back(c);
+          }
+      }
+    }
+  }
+
+  std::unique_ptr<custom_flag_formatter> clone() const override {
+    return std::make_unique<json_message>();
+  }
+};
+
 void setup_logs(const file_config& cfg) {
   auto logger = spdlog::stdout_color_mt("hermd");
   spdlog::set_default_logger(logger);
   spdlog::set_level(spdlog::level::from_str(cfg.log_level));
-  if (cfg.log_format == "json")
-    spdlog::set_pattern(R"({"time":"%Y-%m-%dT%H:%M:%S.%e","module":")"
-                        + cfg.name + R"(","level":"%l","msg":"%v"})");
-  else
+  if (cfg.log_format == "json") {
+    // Module names are [A-Za-z0-9_.-]: no escaping needed.
+    auto f = std::make_unique<spdlog::pattern_formatter>();
+    f->add_flag<json_message>('*').set_pattern(
+      R"({"time":"%Y-%m-%dT%H:%M:%S.%e","module":")" + cfg.name
+      + R"(","level":"%l","msg":"%*"})");
+    spdlog::set_formatter(std::move(f));
+  } else
     spdlog::set_pattern("%H:%M:%S.%e " + cfg.name + " %^%-5l%$ %v");
   spdlog::flush_on(spdlog::level::trace);
 }

@@ -14,6 +14,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -243,4 +246,27 @@ TEST_F(hermd_test, a_channel_that_failed_on_reload_is_retried_by_the_next) {
   auto [s2, out2] = run(hermctl + " -s " + sock("a") + " reload --json");
   EXPECT_NE(squeeze(out2).find("\"added\":[\"rs0\"]"), std::string::npos) << out2;
   ::close(master);
+}
+
+// log.format json: one JSON object per line, the message escaped.
+TEST_F(hermd_test, json_logs_are_one_valid_object_per_line) {
+  auto cfg = module("a", "0x21", free_udp_port(), free_udp_port(),
+                    "log:\n  format: json\napos:\n  - name: 'say \"hi\"'\n"
+                    "    kind: echo\n");
+  child_process a{{hermd, cfg}};
+  ASSERT_TRUE(a.wait_for_line_containing("running as 0x21", 10s)) << a.output();
+  a.signal(SIGTERM);
+  EXPECT_EQ(a.wait(10s), 0) << a.output();
+  std::istringstream in{a.output()};
+  size_t lines = 0;
+  bool quoted = false;
+  for (std::string line; std::getline(in, line);) {
+    ++lines;
+    auto j = nlohmann::json::parse(line, nullptr, false);
+    ASSERT_FALSE(j.is_discarded()) << line;
+    EXPECT_EQ(j.value("module", ""), "a") << line;
+    quoted = quoted || j.value("msg", "").find("say \"hi\"") != std::string::npos;
+  }
+  EXPECT_GE(lines, 3u);
+  EXPECT_TRUE(quoted) << a.output();
 }
