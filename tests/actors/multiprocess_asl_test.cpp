@@ -12,6 +12,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <sstream>
 #include <thread>
@@ -187,6 +188,44 @@ TEST(multiprocess_asl, the_calculator_example_runs) {
     << call.output();
   EXPECT_EQ(lines_with(call.output(), "refused 7 / 0").size(), 1u)
     << call.output();
+  // The results, published by the APO on its module, reached the
+  // subscriber on the calling module.
+  EXPECT_GE(lines_with(call.output(), "published: ").size(), 1u) << call.output();
+  serve.terminate();
+  EXPECT_EQ(serve.wait(10s), 0) << serve.output();
+}
+
+// The same example, with the calling module started from a configuration
+// file (herm::load_config, the file format hermd reads).
+TEST(multiprocess_asl, the_calculator_example_starts_from_a_config_file) {
+  temp_dir dir{"herm-calc"};
+  ASSERT_FALSE(dir.path().empty());
+  auto ps = next_port();
+  auto pc = next_port();
+  auto cfg = dir.path() + "/caller.yaml";
+  {
+    std::ofstream f{cfg};
+    f << "module:\n  name: caller\n  id: 0x21\n  hello_interval_ms: 100\n"
+         "channels:\n  - name: eth0\n    kind: udp\n    interface: "
+      << addr(pc) << "\n    peers: " << addr(ps) << "\n";
+  }
+  child_process serve{{calculator, "serve", "--port", std::to_string(ps),
+                       "--peer", addr(pc), "--seconds", "60"}};
+  ASSERT_TRUE(serve.wait_for_line("registered", 10s)) << serve.output();
+  child_process call{{calculator, "call", "--config", cfg}};
+  EXPECT_EQ(call.wait(30s), 0) << call.output();
+  EXPECT_EQ(lines_with(call.output(), "result 40 + 2 = 42").size(), 1u)
+    << call.output();
+  // A broken file is refused with its line and field.
+  {
+    std::ofstream f{cfg};
+    f << "module:\n  name: caller\n  id: 0x21\nchannels:\n  - name: eth0\n"
+         "    kind: udpp\n    interface: x\n";
+  }
+  child_process bad{{calculator, "call", "--config", cfg}};
+  EXPECT_EQ(bad.wait(30s), 1) << bad.output();
+  EXPECT_NE(bad.output().find(cfg + ":6: channels[0].kind"), std::string::npos)
+    << bad.output();
   serve.terminate();
   EXPECT_EQ(serve.wait(10s), 0) << serve.output();
 }

@@ -23,6 +23,7 @@
 #include "caf/event_based_actor.hpp"
 #include "caf/scoped_actor.hpp"
 
+#include "actors/config.hpp"
 #include "actors/module.hpp"
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/system.hpp"
@@ -57,27 +58,41 @@ volatile std::sig_atomic_t stop_requested = 0;
 
 // [apo]
 // The APO is an ordinary CAF actor. What it returns goes back to the caller;
-// an error is a value too and reaches the caller as a caf::error.
-caf::behavior calculator(caf::event_based_actor*) {
+// an error is a value too and reaches the caller as a caf::error. It also
+// publishes every result on the topic "calculator.results", for whoever
+// subscribed, on any module.
+caf::behavior calculator(caf::event_based_actor* self,
+                         herm::app_support_actor apps) {
+  auto compute = [](const calc_request& r) -> caf::expected<int32_t> {
+    if (r.op == "+")
+      return r.a + r.b;
+    if (r.op == "-")
+      return r.a - r.b;
+    if (r.op == "*")
+      return r.a * r.b;
+    if (r.op == "/" && r.b != 0)
+      return r.a / r.b;
+    return herm::make_error(herm::ec::invalid_parameter,
+                            "cannot compute " + std::to_string(r.a) + " "
+                              + r.op + " " + std::to_string(r.b));
+  };
   return {
-    [](const calc_request& r) -> caf::result<int32_t> {
-      if (r.op == "+")
-        return r.a + r.b;
-      if (r.op == "-")
-        return r.a - r.b;
-      if (r.op == "*")
-        return r.a * r.b;
-      if (r.op == "/" && r.b != 0)
-        return r.a / r.b;
-      return herm::make_error(herm::ec::invalid_parameter,
-                              "cannot compute " + std::to_string(r.a) + " "
-                                + r.op + " " + std::to_string(r.b));
+    [=](const calc_request& r) -> caf::result<int32_t> {
+      auto x = compute(r);
+      if (!x)
+        return x.error();
+      self->send(apps, herm::atom::publish_v, std::string{"calculator.results"},
+                 caf::make_message(std::to_string(r.a) + " " + r.op + " "
+                                   + std::to_string(r.b) + " = "
+                                   + std::to_string(*x)));
+      return *x;
     },
   };
 }
 // [apo-end]
 
-/// Starts this process's module: one UDP interface on loopback.
+// [start]
+/// Starts this process's module in code: one UDP interface on loopback.
 caf::expected<herm::module_handles> start(caf::actor_system& sys,
                                           herm::module_id id, uint16_t port,
                                           const std::string& peers) {
@@ -89,12 +104,24 @@ caf::expected<herm::module_handles> start(caf::actor_system& sys,
   return herm::start_module(sys, mc);
 }
 
+/// Or from a configuration file, the same one hermd reads
+/// (docs/user-guide.md, "Configuration reference"); its errors name the
+/// file, line and field.
+caf::expected<herm::module_handles> start_from(caf::actor_system& sys,
+                                               const std::string& path) {
+  auto cfg = herm::load_config(path);
+  if (!cfg)
+    return cfg.error();
+  return herm::start_module(sys, cfg->module);
+}
+// [start-end]
+
 int serve(caf::actor_system& sys, const herm::module_handles& m, int seconds) {
   caf::scoped_actor self{sys};
   // [register]
   // Registering makes the actor discoverable by name and by type from every
   // module; it stays registered until it exits.
-  auto apo = sys.spawn(calculator);
+  auto apo = sys.spawn(calculator, m.apps);
   caf::error err;
   self->request(m.apps, 5s, herm::atom::add_v, std::string{"calculator"},
                 std::string{"example.calculator"}, apo)
@@ -146,9 +173,25 @@ caf::actor bind_calculator(caf::scoped_actor& self, herm::app_support_actor asl)
 
 int call(caf::actor_system& sys, const herm::module_handles& m) {
   caf::scoped_actor self{sys};
+  // [subscribe]
+  // Any actor can subscribe to a topic; it receives every value published
+  // on any module, as the message that was published.
+  auto listener = sys.spawn([](caf::event_based_actor*) -> caf::behavior {
+    return {[](const std::string& line) {
+      std::cout << "published: " << line << std::endl;
+    }};
+  });
+  self->request(m.apps, 5s, herm::atom::subscribe_v,
+                std::string{"calculator.results"}, listener)
+    .receive([] {}, [](caf::error& err) {
+      std::cout << "error " << herm::render(err) << std::endl;
+    });
+  // [subscribe-end]
   auto proxy = bind_calculator(self, m.apps);
-  if (!proxy)
+  if (!proxy) {
+    self->send_exit(listener, caf::exit_reason::user_shutdown);
     return 1;
+  }
   // A monitor on the proxy learns when the calculator exits or its module
   // becomes unreachable, like a monitor on any actor.
   self->monitor(proxy);
@@ -178,6 +221,9 @@ int call(caf::actor_system& sys, const herm::module_handles& m) {
       std::cout << "calculator gone: " << herm::render(down.reason) << std::endl;
     },
     caf::after(0ms) >> [] {});
+  // Give the published results a moment to arrive before leaving.
+  std::this_thread::sleep_for(500ms);
+  self->send_exit(listener, caf::exit_reason::user_shutdown);
   return failures == 0 ? 0 : 1;
 }
 
@@ -188,9 +234,12 @@ int main(int argc, char** argv) {
   app.fallthrough();
   uint16_t port = 0;
   std::string peer;
+  std::string config;
   int seconds = 0;
   app.add_option("--port", port, "local UDP port (serve: 47100, call: 47101)");
   app.add_option("--peer", peer, "the other module's UDP address(es), comma-separated");
+  app.add_option("--config", config,
+                 "start the module from this configuration file instead");
   auto* serve_cmd = app.add_subcommand("serve", "register the calculator APO");
   serve_cmd->add_option("--seconds", seconds, "stop after N seconds (0: on SIGINT)");
   app.add_subcommand("call", "bind to the calculator and send it requests");
@@ -209,7 +258,8 @@ int main(int argc, char** argv) {
   herm::configure(cfg);
   cfg.add_message_types<caf::id_block::calculator_example>();
   caf::actor_system sys{cfg};
-  auto m = start(sys, serving ? 0x20 : 0x21, port, peer);
+  auto m = config.empty() ? start(sys, serving ? 0x20 : 0x21, port, peer)
+                          : start_from(sys, config);
   if (!m) {
     std::cout << "error " << herm::render(m.error()) << std::endl;
     return 1;
