@@ -22,6 +22,7 @@ struct rtt_client_state {
   bool retry_no_route = false;
   std::vector<uint8_t> payload;
   uint32_t next = 0; // index of the request in flight
+  bool answered = false; // a reply came: the route is there
   int64_t t0 = 0;
   client_result result;
   std::shared_ptr<std::promise<client_result>> done;
@@ -50,6 +51,7 @@ void send_next(rtt_client_actor* self) {
           finish(self);
           return;
         }
+        s.answered = true;
         if (s.next >= s.params.warmup)
           s.result.rtt_ns.push_back(t1 - s.t0);
         if (++s.next == s.params.warmup + s.params.count) {
@@ -63,8 +65,7 @@ void send_next(rtt_client_actor* self) {
       },
       [self](caf::error& err) {
         auto& s = self->state;
-        if (s.retry_no_route && s.next < s.params.warmup
-            && is(err, ec::no_route)) {
+        if (s.retry_no_route && !s.answered && is(err, ec::no_route)) {
           self->delayed_send(self, std::chrono::milliseconds(50), atom::tick_v);
           return;
         }

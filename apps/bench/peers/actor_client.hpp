@@ -15,9 +15,10 @@
 namespace herm::bench {
 
 /// Runs `p.warmup + p.count` round trips against `target` and returns the
-/// last `p.count`. With `retry_no_route`, a herm.no_route error during the
-/// warm-up is retried after 50 ms (the client's route to the server may
-/// still be converging right after binding). Blocks the calling thread.
+/// last `p.count`. With `retry_no_route`, a herm.no_route error before the
+/// first reply is retried after 50 ms (the client's route to the server may
+/// still be converging right after binding); that wait is never timed.
+/// Blocks the calling thread.
 client_result run_actor_client(caf::actor_system& sys, const caf::actor& target,
                                const endpoint_params& p, bool retry_no_route);
 
