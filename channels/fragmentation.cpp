@@ -161,7 +161,10 @@ void fragmenter::split(const uint8_t* data, size_t size,
       n -= from_payload;
       offset += from_payload;
     }
-    std::memcpy(out, crc + (offset - size), n);
+    // Only when CRC bytes are due: with n == 0 the offset may still lie in
+    // the payload, and crc + (offset - size) would point far outside.
+    if (n > 0)
+      std::memcpy(out, crc + (offset - size), n);
   };
   auto c = cut_for(mtu_, size);
   auto stream = size + crc_size;
