@@ -130,8 +130,15 @@ std::string shell_quote(const std::string& s) {
 /// into stdout, at most 60 s.
 run_result hermctl(const std::vector<std::string>& args,
                    const std::string& env = "") {
+  // Forwarded requests wait for discoveries and bindings: under sanitizers
+  // on a loaded machine the default 5 s can pass. A test that wants a
+  // timeout says so with its own --timeout.
+  auto full = args;
+  if (args.size() >= 2 && args[0] == "-s"
+      && std::find(args.begin(), args.end(), "--timeout") == args.end())
+    full.insert(full.begin() + 2, {"--timeout", "30000"});
   std::string cmd = env + " " + shell_quote(hermctl_bin);
-  for (auto& a : args)
+  for (auto& a : full)
     cmd += " " + shell_quote(a);
   cmd += " 2>&1";
   herm::test::child_process p{{"/bin/sh", "-c", cmd}};
