@@ -143,6 +143,9 @@ def fragmentation():
     write(t, "honest-wide", mtu64 + bytes([1, 0x00, 0x04, 0, 3, 80, 0x03]))
     write(t, "honest-content", mtu8 + bytes([1, 100, 0, 1]) + bytes(range(1, 17))
           + bytes([3, 100, 0x02]))
+    # Regression: the first fuzz finding (fixed in 5e0fb4b): any fragmented
+    # packet made the fragmenter compute crc + (offset - size) out of range.
+    write(t, "regression-crc-pointer", h("38 00 01 50"))
     # A single frame, a bad header, an orphan, then time passes.
     write(t, "misc", mtu8 + bytes([0, 2, 3]) + h("00 AA BB") + bytes([0, 3, 2]) + h("4F 01")
           + bytes([0, 4, 3]) + h("85 01 02") + bytes([2, 0xD0, 0x07]))
