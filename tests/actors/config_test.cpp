@@ -848,3 +848,13 @@ TEST(config, puts_the_default_control_socket_in_the_runtime_dir) {
 }
 
 } // namespace
+
+// Found by fuzz_config (tests/fuzz/crashes/config-loadall-comma.bin): with
+// yaml-cpp 0.7's LoadAll, a lone "," never returned (empty documents for
+// ever, gigabytes allocated). Now it is one bounded, refused document.
+TEST(config, a_lone_comma_is_refused_not_looped_on) {
+  auto cfg = parse_config(",", "robot.yaml");
+  ASSERT_FALSE(cfg);
+  EXPECT_NE(render(cfg.error()).find("robot.yaml:"), std::string::npos)
+    << render(cfg.error());
+}

@@ -615,3 +615,26 @@ TEST_F(marshal_test, random_and_mutated_bytes_never_crash_and_stay_canonical) {
 }
 
 } // namespace
+
+// Found by fuzz_marshal (tests/fuzz/crashes/marshal-duration-unit.bin): a
+// caf::duration with a time unit past nanoseconds decoded, and printing it
+// (CAF prints every message an actor drops) read past CAF's table of unit
+// names: one request could kill a module.
+TEST_F(marshal_test, refuses_a_duration_with_an_out_of_range_time_unit) {
+  // The fuzzer's input: one @duration whose unit is 0x10000000.
+  byte_buffer bad{0x01, 0x01, 0x09, '@', 'd', 'u', 'r', 'a', 't', 'i', 'o',
+                  'n', 0x00, 0x00, 0x00, 0x10, 0x01, 0x00, 0x00, 0x00,
+                  0x00, 0x00, 0x00, 0x00};
+  auto back = herm::unmarshal(sys(), bad.data(), bad.size());
+  ASSERT_FALSE(back);
+  EXPECT_NE(herm::render(back.error()).find("time unit 268435456 is out of range"),
+            std::string::npos)
+    << herm::render(back.error());
+  // The same bytes with a valid unit (seconds) decode.
+  auto good = bad;
+  good[12] = 0x02;
+  good[15] = 0x00;
+  auto ok = herm::unmarshal(sys(), good.data(), good.size());
+  ASSERT_TRUE(ok) << herm::render(ok.error());
+  EXPECT_EQ(ok->get_as<caf::duration>(0).unit, caf::time_unit::seconds);
+}
