@@ -56,9 +56,6 @@ work=$(mktemp -d "${TMPDIR:-/tmp}/herm-fuzz.XXXXXX")
 # stops the run, like ASan's, except the reported, unfixed findings listed in
 # tests/fuzz/known-findings.supp.
 cat "$here/../ubsan.supp" "$here/known-findings.supp" >"$work/ubsan.supp"
-echo "note: known findings (tests/fuzz/crashes/) are not reported again:" \
-  "fuzz_config skips the yaml-cpp LoadAll loop, fuzz_marshal does not print" \
-  "a caf::duration with a bad unit (HERM_FUZZ_KNOWN_FINDINGS=1 shows them)"
 export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:suppressions=$work/ubsan.supp"
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1}"
 
