@@ -56,6 +56,11 @@ namespace {
 
 volatile std::sig_atomic_t stop_requested = 0;
 
+/// Prints one whole line: the topic listener prints from another thread.
+void say(const std::string& line) {
+  std::cout << line + "\n" << std::flush;
+}
+
 // [apo]
 // The APO is an ordinary CAF actor. What it returns goes back to the caller;
 // an error is a value too and reaches the caller as a caf::error. It also
@@ -133,7 +138,7 @@ int serve(caf::actor_system& sys, const herm::module_handles& m, int seconds) {
       [&](caf::error& e) { err = e; });
   // [register-end]
   if (err) {
-    std::cout << "error " << herm::render(err) << std::endl;
+    say("error " + herm::render(err));
     self->send_exit(apo, caf::exit_reason::user_shutdown);
     return 1;
   }
@@ -162,7 +167,7 @@ caf::actor bind_calculator(caf::scoped_actor& self, herm::app_support_actor asl)
     if (proxy)
       return proxy;
     if (!herm::is(err, herm::ec::not_found) && !herm::is(err, herm::ec::no_route)) {
-      std::cout << "error " << herm::render(err) << std::endl;
+      say("error " + herm::render(err));
       break;
     }
     std::this_thread::sleep_for(200ms);
@@ -178,13 +183,13 @@ int call(caf::actor_system& sys, const herm::module_handles& m) {
   // on any module, as the message that was published.
   auto listener = sys.spawn([](caf::event_based_actor*) -> caf::behavior {
     return {[](const std::string& line) {
-      std::cout << "published: " << line << std::endl;
+      say("published: " + line);
     }};
   });
   self->request(m.apps, 5s, herm::atom::subscribe_v,
                 std::string{"calculator.results"}, listener)
     .receive([] {}, [](caf::error& err) {
-      std::cout << "error " << herm::render(err) << std::endl;
+      say("error " + herm::render(err));
     });
   // [subscribe-end]
   auto proxy = bind_calculator(self, m.apps);
@@ -201,11 +206,11 @@ int call(caf::actor_system& sys, const herm::module_handles& m) {
     // The request crosses the network; the reply comes back here.
     self->request(proxy, 5s, r).receive(
       [&](int32_t result) {
-        std::cout << "result " << r.a << " " << r.op << " " << r.b << " = "
-                  << result << std::endl;
+        say("result " + std::to_string(r.a) + " " + r.op + " "
+            + std::to_string(r.b) + " = " + std::to_string(result));
       },
       [&](caf::error& err) {
-        std::cout << "error " << herm::render(err) << std::endl;
+        say("error " + herm::render(err));
         ++failures;
       });
   }
@@ -213,12 +218,12 @@ int call(caf::actor_system& sys, const herm::module_handles& m) {
   self->request(proxy, 5s, calc_request{7, 0, "/"}).receive(
     [&](int32_t) { ++failures; },
     [&](caf::error& err) {
-      std::cout << "refused 7 / 0: " << herm::render(err) << std::endl;
+      say("refused 7 / 0: " + herm::render(err));
     });
   // Had the calculator gone away meanwhile, its down message would be here.
   self->receive(
     [&](caf::down_msg& down) {
-      std::cout << "calculator gone: " << herm::render(down.reason) << std::endl;
+      say("calculator gone: " + herm::render(down.reason));
     },
     caf::after(0ms) >> [] {});
   // Give the published results a moment to arrive before leaving.
@@ -261,7 +266,7 @@ int main(int argc, char** argv) {
   auto m = config.empty() ? start(sys, serving ? 0x20 : 0x21, port, peer)
                           : start_from(sys, config);
   if (!m) {
-    std::cout << "error " << herm::render(m.error()) << std::endl;
+    say("error " + herm::render(m.error()));
     return 1;
   }
   auto status = serving ? serve(sys, *m, seconds) : call(sys, *m);
