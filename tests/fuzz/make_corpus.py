@@ -85,6 +85,9 @@ def marshal():
     write(t, "atom-timespan", payload(elem("@atom", h("F2 AD B6 0F 00 00 00 00")),
                                       elem("@timespan", struct.pack("<q", 5000)),
                                       elem("@timestamp", struct.pack("<q", 7))))
+    # Regression: a caf::duration with time unit 0x10000000 crashed printing.
+    write(t, "regression-duration-unit",
+          payload(elem("@duration", struct.pack("<IQ", 0x10000000, 1))))
 
 
 def serial_framing():
@@ -158,6 +161,8 @@ def config():
         if name.endswith(".yaml"):
             shutil.copy(os.path.join(src, name), os.path.join(CORPUS, t, name))
     write(t, "minimal.yaml", b"module:\n  name: m\n")
+    # Regression: a lone "," made yaml-cpp's LoadAll loop for ever.
+    write(t, "regression-loadall-comma", b",")
     write(t, "full.yaml", b"""module:
   name: alpha
   id: 0x30
