@@ -4,6 +4,7 @@
 // profiles. Deterministic: the same command prints the same numbers.
 //
 //   bench_routing_convergence [--sizes 10,100,1000] [--hello-ms 100]
+//                             [--json FILE]
 //
 // Cold start: every module starts at t = 0; converged when every module
 // has a selected class-0 route to every other module (all within the hop
@@ -13,6 +14,7 @@
 // (frames vanish, no driver notices: only missed hellos reveal it); time
 // until traffic takes the alternate path, for several hello intervals. A
 // failure the driver notices (socket error, interface down) repairs at once.
+// --json FILE also writes every row as JSON (apps/bench/report reads it).
 
 #include <algorithm>
 #include <chrono>
@@ -21,6 +23,7 @@
 #include <sstream>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "actors/testing/sim_network.hpp"
 
@@ -29,6 +32,10 @@ using namespace herm::testkit;
 using namespace std::chrono;
 
 namespace {
+
+/// Every row printed, for --json.
+nlohmann::json results = {{"cold_start", nlohmann::json::array()},
+                          {"repair", nlohmann::json::array()}};
 
 struct counts {
   uint64_t hellos = 0;
@@ -104,6 +111,16 @@ void cold_start(size_t n, milliseconds hello) {
               static_cast<unsigned long long>(c.entries),
               static_cast<unsigned long long>(c.requests), secs);
   std::fflush(stdout);
+  results["cold_start"].push_back(
+    {{"modules", n},
+     {"converged", converged(net)},
+     {"converged_ms", t.count()},
+     {"hello_ms", hello.count()},
+     {"hellos", c.hellos},
+     {"updates", c.updates},
+     {"update_entries", c.entries},
+     {"seqno_requests", c.requests},
+     {"wall_s", secs}});
 }
 
 /// Time from a silent failure of link 0-1 at `phase` after convergence
@@ -157,6 +174,17 @@ void repair(milliseconds hello) {
               fmt(times[times.size() / 2]).c_str(), fmt(times.back()).c_str(),
               loops);
   std::fflush(stdout);
+  auto ms = [](milliseconds t) -> nlohmann::json {
+    if (t == milliseconds::max())
+      return nullptr; // never repaired
+    return t.count();
+  };
+  results["repair"].push_back({{"hello_ms", hello.count()},
+                               {"failures", times.size()},
+                               {"min_ms", ms(times.front())},
+                               {"median_ms", ms(times[times.size() / 2])},
+                               {"max_ms", ms(times.back())},
+                               {"loops", loops}});
 }
 
 } // namespace
@@ -167,6 +195,8 @@ int main(int argc, char** argv) {
   CLI::App app{"HERM routing convergence and repair (simulated time)"};
   app.add_option("--sizes", sizes, "module counts, comma-separated");
   app.add_option("--hello-ms", hello_ms, "hello interval for cold start");
+  std::string json_file;
+  app.add_option("--json", json_file, "also write the results as JSON to FILE");
   CLI11_PARSE(app, argc, argv);
   std::printf("Cold start (random mesh, hello %d ms, full update every 4 hellos)\n\n",
               hello_ms);
@@ -184,5 +214,24 @@ int main(int argc, char** argv) {
               "|---|---|---|---|---|\n");
   for (int h : {50, 100, 500, 1000, 4000})
     repair(milliseconds(h));
+  if (!json_file.empty()) {
+    results["benchmark"] = "bench_routing_convergence";
+    results["sizes"] = sizes;
+    std::string cmd;
+    for (int i = 0; i < argc; ++i)
+      cmd += (i > 0 ? " " : "") + std::string{argv[i]};
+    results["command"] = cmd;
+    std::FILE* f = std::fopen(json_file.c_str(), "w");
+    if (f == nullptr) {
+      std::perror(json_file.c_str());
+      return 1;
+    }
+    auto text = results.dump(2) + "\n";
+    auto ok = std::fwrite(text.data(), 1, text.size(), f) == text.size();
+    if (std::fclose(f) != 0 || !ok) {
+      std::fprintf(stderr, "%s: write failed\n", json_file.c_str());
+      return 1;
+    }
+  }
   return 0;
 }
