@@ -17,6 +17,7 @@
 #include "actors/runtime/error.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/link_profile.hpp"
+#include "routing/auth.hpp"
 #include "routing/module_id.hpp"
 
 namespace herm {
@@ -329,6 +330,33 @@ public:
       cfg.threads = static_cast<size_t>(integer(*x, 0, 256));
   }
 
+  /// Pre-shared key authentication of the network (routing/auth.hpp). The
+  /// key is read here, from a file with strict permissions; it never
+  /// appears in errors or logs.
+  void auth(const field& f, file_config& cfg) const {
+    auto fs = entries(f.value, f.path, f.key_line, "a map",
+                      {"key_file", "key_id", "tag_bytes", "data"});
+    auto& a = cfg.module.routing.auth;
+    a = auth_config{};
+    auto& kf = require(fs, "auth.key_file", f.key_line,
+                       "the path of a key file");
+    auto path = text(kf, "the path of a key file");
+    if (auto* x = find(fs, "auth.key_id"))
+      a.key_id = static_cast<uint8_t>(integer(*x, 0, 255));
+    if (auto* x = find(fs, "auth.tag_bytes")) {
+      auto n = choice(*x, {"8", "16"});
+      a.tag_bytes = static_cast<uint8_t>(n == "8" ? 8 : 16);
+    }
+    if (auto* x = find(fs, "auth.data"))
+      a.data = choice(*x, {"discovery", "all"}) == "all" ? auth_data::all
+                                                          : auth_data::discovery;
+    std::vector<uint8_t> key;
+    auto err = read_key(path, key);
+    if (!err.empty())
+      fail(kf.line(), kf.path, err);
+    a.key = std::move(key);
+  }
+
   /// Returns true when the section names a socket (or turns it off).
   bool control(const field& f, file_config& cfg) const {
     auto fs = entries(f.value, f.path, f.key_line, "a map", {"socket"});
@@ -460,7 +488,7 @@ public:
     cfg.path = file_;
     auto fs = entries(root, "", 1, "a map of sections",
                       {"module", "log", "scheduler", "control", "apps",
-                       "channels", "apos"});
+                       "channels", "apos", "auth"});
     // The module first: the control socket's default needs its name.
     module(require(fs, "module", 1, "the module's name and id"), cfg);
     bool has_socket = false;
@@ -477,6 +505,8 @@ public:
         channels(f, cfg);
       else if (f.path == "apos")
         apos(f, cfg);
+      else if (f.path == "auth")
+        auth(f, cfg);
     }
     if (!has_socket)
       cfg.control_socket = default_control_socket(cfg.name);

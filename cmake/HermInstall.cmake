@@ -98,7 +98,7 @@ endforeach()
 
 # -- the CMake package ------------------------------------------------------------
 # Static libraries carry their private dependencies into the user's link
-# (zlib, yaml-cpp; nlohmann_json is an exported target name), so the package
+# (zlib, OpenSSL's libcrypto, yaml-cpp; nlohmann_json is an exported target name), so the package
 # config must find them too; shared ones do not.
 get_target_property(herm_runtime_type herm_runtime TYPE)
 if(herm_runtime_type STREQUAL "STATIC_LIBRARY")
@@ -199,7 +199,7 @@ endif()
 # What find_package(herm) needs to build a module process against the static
 # libraries; recommended, so that a robot that only runs hermd can skip them.
 set(CPACK_DEBIAN_PACKAGE_RECOMMENDS
-    "libcaf-dev (>= 0.17.6), zlib1g-dev, libyaml-cpp-dev, nlohmann-json3-dev, cmake")
+    "libcaf-dev (>= 0.17.6), zlib1g-dev, libssl-dev, libyaml-cpp-dev, nlohmann-json3-dev, cmake")
 # `cpack --config CPackSourceConfig.cmake`: sources only, no build trees.
 set(CPACK_SOURCE_IGNORE_FILES "/\\.git/" "/build[^/]*/" "/\\.cache/")
 include(CPack)

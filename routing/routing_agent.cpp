@@ -71,6 +71,8 @@ struct agent_state {
   /// Said goodbye: sends no more hellos.
   bool leaving = false;
   byte_buffer buf;
+  /// Signs and verifies packets when the network has a key.
+  std::unique_ptr<authenticator> auth;
 
   std::chrono::steady_clock::duration hold() const {
     return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
@@ -82,11 +84,32 @@ using agent_impl = routing_agent_actor::stateful_pointer<agent_state>;
 
 // -- sending --------------------------------------------------------------------
 
+/// `bytes` as they leave on channel `cs`: with a trailer for that link when
+/// `sign` (a keyed network), else unchanged. Data packets get their
+/// authenticated flag set first.
+byte_buffer outgoing(agent_impl self, const channel_state& cs,
+                     const byte_buffer& bytes, bool sign) {
+  auto& st = self->state;
+  if (!sign || !st.auth)
+    return bytes;
+  byte_buffer out;
+  out.reserve(bytes.size() + st.auth->config().trailer_size());
+  out = bytes;
+  if (!out.empty() && (out[0] & 0x0F) == static_cast<uint8_t>(packet_type::data)
+      && out.size() >= data_header_size)
+    set_authenticated(out.data(), true);
+  st.auth->sign(out, static_cast<uint8_t>(cs.code));
+  ++st.stats.tx_signed;
+  return out;
+}
+
+/// Control packets: signed whenever the network has a key.
 void send_on(agent_impl self, channel_id ch, link_addr dst,
              const byte_buffer& bytes, uint8_t prio = prio_control) {
   auto i = self->state.channels.find(ch);
   if (i != self->state.channels.end())
-    self->send(i->second.handle, write_packet{dst, prio, bytes});
+    self->send(i->second.handle,
+               write_packet{dst, prio, outgoing(self, i->second, bytes, true)});
 }
 
 void send_all(agent_impl self, const byte_buffer& bytes,
@@ -94,7 +117,8 @@ void send_all(agent_impl self, const byte_buffer& bytes,
   for (auto& kv : self->state.channels)
     if (kv.first != except)
       self->send(kv.second.handle,
-                 write_packet{broadcast_addr, prio_control, bytes});
+                 write_packet{broadcast_addr, prio_control,
+                              outgoing(self, kv.second, bytes, true)});
 }
 
 /// Hellos on every channel; a goodbye (interval 0) when `leaving`.
@@ -339,13 +363,28 @@ packet_trace make_trace(agent_impl self, packet_trace::what_t what,
   return t;
 }
 
-/// Puts an encoded data packet on the channel and neighbour of `nh`.
+/// Whether a data packet (header `h`, encoded in `bytes` without trailer)
+/// is signed on its way out.
+bool must_sign(agent_impl self, const data_header& h, const byte_buffer& bytes) {
+  auto& st = self->state;
+  if (!st.auth)
+    return false;
+  auto off = header_size(h);
+  return data_needs_auth(st.auth->config(), h.dst, h.protocol, bytes.data() + off,
+                         bytes.size() - off);
+}
+
+/// Puts an encoded data packet on the channel and neighbour of `nh`, signed
+/// when `sign`.
 void transmit(agent_impl self, const next_hop& nh, uint8_t priority,
-              byte_buffer bytes) {
+              byte_buffer bytes, bool sign) {
   auto i = self->state.channels.find(nh.channel);
-  if (i != self->state.channels.end())
-    self->send(i->second.handle,
-               write_packet{nh.neighbour, priority, std::move(bytes)});
+  if (i == self->state.channels.end())
+    return;
+  if (sign)
+    bytes = outgoing(self, i->second, bytes, true);
+  self->send(i->second.handle,
+             write_packet{nh.neighbour, priority, std::move(bytes)});
 }
 
 /// Passes on a packet for another module, one hop limit less.
@@ -367,7 +406,8 @@ void forward(agent_impl self, const data_header& h, byte_buffer bytes,
     auto t = make_trace(self, packet_trace::forwarded, h, bytes.size(), in);
     trace_out(self, t, h, *nh);
   }
-  transmit(self, *nh, h.priority, std::move(bytes));
+  auto sign = must_sign(self, h, bytes);
+  transmit(self, *nh, h.priority, std::move(bytes), sign);
 }
 
 /// True the first time flood (src, id) is seen within the flood memory;
@@ -388,12 +428,15 @@ bool fresh_broadcast(agent_impl self, module_id src, uint32_t id) {
   return true;
 }
 
-/// Sends a flooded broadcast on every channel but `except`.
+/// Sends a flooded broadcast on every channel but `except` (signed per
+/// link in a keyed network: every hop signs with its own counter).
 void relay_broadcast(agent_impl self, uint8_t priority, const byte_buffer& bytes,
                      channel_id except) {
   for (auto& kv : self->state.channels)
     if (kv.first != except)
-      self->send(kv.second.handle, write_packet{broadcast_addr, priority, bytes});
+      self->send(kv.second.handle,
+                 write_packet{broadcast_addr, priority,
+                              outgoing(self, kv.second, bytes, true)});
 }
 
 void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
@@ -401,6 +444,13 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
   auto h = decode_data_header(bytes.data(), bytes.size());
   if (!h) {
     ++st.stats.rx_malformed;
+    return;
+  }
+  if (h->authenticated) {
+    // Signed by a keyed network, and this module has no key (a keyed one
+    // has checked and removed the trailer): where the payload ends is
+    // unknown, so nothing of it can be delivered.
+    ++st.stats.rx_auth_failed;
     return;
   }
   if (h->dst == broadcast_module) {
@@ -571,6 +621,57 @@ void on_conflict(agent_impl self, channel_id ch, const byte_buffer& bytes) {
   }
 }
 
+// -- authentication -------------------------------------------------------------
+
+/// In a keyed network: checks the trailer of a received packet and strips
+/// it. False (and counted) when the packet must be dropped.
+bool authenticate(agent_impl self, packet_received& pkt, packet_type type) {
+  auto& st = self->state;
+  auto ci = st.channels.find(pkt.channel);
+  if (ci == st.channels.end())
+    return false;
+  auto& b = pkt.bytes;
+  size_t min_body = 1;
+  if (type == packet_type::data) {
+    auto h = decode_data_header(b.data(), b.size());
+    if (!h) {
+      ++st.stats.rx_malformed;
+      return false;
+    }
+    if (!h->authenticated) {
+      auto off = header_size(*h);
+      if (data_needs_auth(st.auth->config(), h->dst, h->protocol, b.data() + off,
+                          b.size() - off)) {
+        ++st.stats.rx_unsigned;
+        return false;
+      }
+      return true;
+    }
+    min_body = header_size(*h);
+  }
+  size_t body = 0;
+  auto res = st.auth->verify(b.data(), b.size(),
+                             static_cast<uint8_t>(ci->second.code),
+                             self->clock().now(), body, min_body);
+  switch (res) {
+    case auth_result::ok:
+      break;
+    case auth_result::replayed:
+      ++st.stats.rx_replayed;
+      return false;
+    case auth_result::table_full:
+      ++st.stats.rx_auth_table_full;
+      return false;
+    default:
+      ++st.stats.rx_auth_failed;
+      return false;
+  }
+  b.resize(body);
+  if (type == packet_type::data)
+    set_authenticated(b.data(), false);
+  return true;
+}
+
 // -- timer ----------------------------------------------------------------------
 
 /// Runs every quarter hello interval: liveness, expiry and addressing; every
@@ -672,7 +773,8 @@ caf::error originate(agent_impl self, send_packet& msg) {
     auto t = make_trace(self, packet_trace::originated, h, bytes.size());
     trace_out(self, t, h, *nh);
   }
-  transmit(self, *nh, h.priority, std::move(bytes));
+  auto sign = must_sign(self, h, bytes);
+  transmit(self, *nh, h.priority, std::move(bytes), sign);
   return caf::none;
 }
 
@@ -695,6 +797,17 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
   acfg.static_id = init.cfg.id;
   acfg.claim_interval = init.cfg.hello_interval;
   init.alloc = std::make_unique<address_allocator>(acfg, instance, seed);
+  if (init.cfg.auth.enabled()) {
+    // A fresh sender index per start (RFC 8967's index): receivers keep
+    // one counter per index, so a restarted module, whose counter starts
+    // at 1 again, is a new sender rather than a replay.
+    std::random_device rd;
+    init.auth = std::make_unique<authenticator>(init.cfg.auth,
+                                                static_cast<uint32_t>(rd()));
+    // The key lives on in the authenticator only.
+    std::fill(init.cfg.auth.key.begin(), init.cfg.auth.key.end(), 0);
+    init.cfg.auth.key.clear();
+  }
   init.stats.instance = instance;
   // Flood ids start at a random point so that a restarted module's first
   // broadcasts are not taken for duplicates of its previous life's.
@@ -814,6 +927,8 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
         ++st.stats.rx_malformed;
         return;
       }
+      if (st.auth && !authenticate(self, pkt, *type))
+        return;
       switch (*type) {
         case packet_type::data:
           on_data(self, pkt.channel, std::move(pkt.bytes));

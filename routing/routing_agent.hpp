@@ -16,6 +16,7 @@
 #include "actors/runtime/atoms.hpp"
 #include "channels/io_manager.hpp"
 #include "channels/messages.hpp"
+#include "routing/auth.hpp"
 #include "routing/module_id.hpp"
 #include "routing/route_table.hpp"
 #include "routing/wire.hpp"
@@ -145,6 +146,16 @@ struct routing_stats {
   uint64_t tx_claims = 0;
   uint64_t tx_conflicts = 0;
   uint64_t tx_seqno_requests = 0;
+  /// Keyed networks (routing_config::auth): packets dropped for a missing,
+  /// wrong or forged trailer (rx_auth_failed), a counter not above the
+  /// sender's last (rx_replayed), a data packet that must be signed but is
+  /// not (rx_unsigned), a new sender while the sender table is full of live
+  /// ones (rx_auth_table_full); packets signed (tx_signed, one per channel).
+  uint64_t rx_auth_failed = 0;
+  uint64_t rx_replayed = 0;
+  uint64_t rx_unsigned = 0;
+  uint64_t rx_auth_table_full = 0;
+  uint64_t tx_signed = 0;
 };
 
 template <class Inspector>
@@ -155,7 +166,8 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.broadcasts_originated, x.broadcasts_relayed, x.dropped_duplicate,
            x.rx_malformed, x.rx_unknown_neighbour, x.rx_refused_routes, x.rx_goodbyes,
            x.tx_hellos, x.tx_updates, x.tx_update_entries, x.tx_claims,
-           x.tx_conflicts, x.tx_seqno_requests);
+           x.tx_conflicts, x.tx_seqno_requests, x.rx_auth_failed,
+           x.rx_replayed, x.rx_unsigned, x.rx_auth_table_full, x.tx_signed);
 }
 
 /// Receives this module's data packets of one protocol (the application
@@ -247,6 +259,10 @@ struct routing_config {
   /// Instance nonce and seed for the address allocator; 0: random.
   uint64_t instance = 0;
   uint64_t seed = 0;
+  /// Pre-shared key authentication (routing/auth.hpp); no key: none. With a
+  /// key every control packet sent carries a trailer and every one received
+  /// must carry a valid one; data packets as `auth.data` says.
+  auth_config auth;
   /// Test hook: called for every data packet this module handles (delivered
   /// or forwarded), with the module's id; used by packet-path checkers.
   std::function<void(module_id self, const data_header&, const byte_buffer&)>

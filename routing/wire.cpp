@@ -25,7 +25,9 @@ constexpr size_t min_entry_size = entry_head_size + size_classes * class_metric_
 
 /// Offset of the hop limit in a data header, and the flags' reserved bits.
 constexpr size_t data_hop_limit_offset = 5;
-constexpr uint8_t data_reserved_flags = 0xE0;
+constexpr size_t data_flags_offset = 6;
+constexpr uint8_t data_reserved_flags = 0xC0;
+constexpr uint8_t data_auth_flag = 0x20;
 constexpr uint8_t data_flood_flag = 0x10;
 
 /// Largest link_code value on the wire.
@@ -209,7 +211,8 @@ void encode(const data_header& h, byte_buffer& out) {
   w.u16(h.dst);
   w.u8(h.hop_limit);
   w.u8(static_cast<uint8_t>((h.size_class & 0x03) | (h.priority & 0x03) << 2
-                            | (h.flood_id != 0 ? data_flood_flag : 0)));
+                            | (h.flood_id != 0 ? data_flood_flag : 0)
+                            | (h.authenticated ? data_auth_flag : 0)));
   w.u8(h.protocol);
   if (h.flood_id != 0)
     w.u32(h.flood_id);
@@ -234,6 +237,7 @@ caf::expected<data_header> decode_data_header(const uint8_t* data,
   h.size_class = static_cast<uint8_t>(flags & 0x03);
   h.priority = static_cast<uint8_t>(flags >> 2 & 0x03);
   h.protocol = r.u8();
+  h.authenticated = (flags & data_auth_flag) != 0;
   if ((flags & data_flood_flag) != 0) {
     if (size < flood_header_size)
       return bad(t, "truncated header: " + num(size) + " of "
@@ -249,6 +253,13 @@ caf::expected<data_header> decode_data_header(const uint8_t* data,
 
 void set_hop_limit(uint8_t* packet, uint8_t hop_limit) {
   packet[data_hop_limit_offset] = hop_limit;
+}
+
+void set_authenticated(uint8_t* packet, bool on) {
+  if (on)
+    packet[data_flags_offset] |= data_auth_flag;
+  else
+    packet[data_flags_offset] &= static_cast<uint8_t>(~data_auth_flag);
 }
 
 // -- hello -----------------------------------------------------------------------

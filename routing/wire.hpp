@@ -51,6 +51,10 @@ struct data_header {
   /// bytes, announced by flag bit 4. A broadcast without one is link-local:
   /// delivered to the neighbours that hear it, never relayed.
   uint32_t flood_id = 0;
+  /// Flag bit 5: an authentication trailer (routing/auth.hpp) ends the
+  /// packet, after the payload. Set and checked by the routing agent of a
+  /// keyed network, per hop; the trailer is not part of the payload.
+  bool authenticated = false;
 };
 
 /// Size of a data header without, and with, a flood id.
@@ -70,6 +74,9 @@ caf::expected<data_header> decode_data_header(const uint8_t* data, size_t size);
 
 /// Rewrites the hop limit in an encoded data packet (forwarding).
 void set_hop_limit(uint8_t* packet, uint8_t hop_limit);
+
+/// Sets or clears the authenticated flag in an encoded data packet.
+void set_authenticated(uint8_t* packet, bool on);
 
 // -- link-local control ----------------------------------------------------------
 

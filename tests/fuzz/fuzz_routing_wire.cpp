@@ -9,12 +9,16 @@
 //   canonical; a data packet is its header followed by the payload);
 // - decoded values respect the documented bounds (priority, size class,
 //   update entries, hop counts, path lengths, link codes);
-// - set_hop_limit changes the hop limit of a data packet and nothing else.
+// - set_hop_limit changes the hop limit of a data packet and nothing else;
+//   set_authenticated changes flag bit 5 and nothing else;
+// - a keyed receiver never accepts the input as authenticated (it was not
+//   signed with the key), whatever its trailer says, and never crashes.
 
 #include <cstddef>
 #include <cstdint>
 
 #include "actors/runtime/error.hpp"
+#include "routing/auth.hpp"
 #include "routing/wire.hpp"
 #include "tests/fuzz/fuzz_support.hpp"
 
@@ -78,6 +82,27 @@ void check_data(const uint8_t* data, size_t size,
                   && again->flood_id == h->flood_id);
   for (size_t i = 0; i < size; ++i)
     HERM_FUZZ_CHECK(i == 5 || copy[i] == data[i]);
+  // The authenticated flag is bit 5 of the flags and nothing else.
+  set_authenticated(copy.data(), !h->authenticated);
+  auto flipped = decode_data_header(copy.data(), copy.size());
+  HERM_FUZZ_CHECK(flipped);
+  HERM_FUZZ_CHECK(flipped->authenticated != h->authenticated);
+  HERM_FUZZ_CHECK((copy[6] ^ data[6]) == 0x20);
+  set_authenticated(copy.data(), h->authenticated);
+  HERM_FUZZ_CHECK(copy[6] == data[6]);
+}
+
+/// A keyed network's receiver: nothing unsigned passes.
+void check_auth(const uint8_t* data, size_t size) {
+  static auth_config cfg = [] {
+    auth_config c;
+    c.key.assign(32, 0x3C);
+    return c;
+  }();
+  authenticator rx{cfg, 1};
+  size_t body = 0;
+  auto res = rx.verify(data, size, 4, authenticator::time_point{}, body);
+  HERM_FUZZ_CHECK(res != auth_result::ok);
 }
 
 } // namespace
@@ -86,6 +111,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto peeked = peek_type(data, size);
   HERM_FUZZ_CHECK(refused_properly(peeked));
   int decoded = 0;
+  check_auth(data, size);
   check_data(data, size, peeked, decoded);
   decoded += try_decoder(data, size, packet_type::hello, peeked, decode_hello,
                          [](const hello&) {});

@@ -563,8 +563,9 @@ TEST(wire_malformed, a_bad_version_or_another_type_is_rejected_by_every_decoder)
 }
 
 TEST(wire_malformed, data_headers_with_reserved_flag_bits_are_rejected) {
+  // Bit 5 is the authenticated flag (wire_layout.data_header_auth_flag_is_bit_5).
   auto good = enc(data_header{1, 2, 3, 3, 3, 0});
-  for (int bit = 5; bit < 8; ++bit) {
+  for (int bit = 6; bit < 8; ++bit) {
     SCOPED_TRACE(bit);
     auto b = good;
     b[6] = static_cast<uint8_t>(b[6] | 1 << bit);

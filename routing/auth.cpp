@@ -1,0 +1,295 @@
+#include "routing/auth.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <openssl/core_names.h>
+#include <openssl/crypto.h>
+#include <openssl/evp.h>
+#include <openssl/params.h>
+
+#include "actors/runtime/error.hpp"
+
+namespace herm {
+
+// -- key files -------------------------------------------------------------------
+
+namespace {
+
+/// Larger key files are refused before reading (hex of 64 bytes is 128).
+constexpr off_t max_key_file = 1024;
+
+int hex_value(char c) {
+  if (c >= '0' && c <= '9')
+    return c - '0';
+  if (c >= 'a' && c <= 'f')
+    return c - 'a' + 10;
+  if (c >= 'A' && c <= 'F')
+    return c - 'A' + 10;
+  return -1;
+}
+
+std::string octal(unsigned mode) {
+  char buf[16];
+  std::snprintf(buf, sizeof(buf), "%04o", mode & 07777);
+  return buf;
+}
+
+} // namespace
+
+caf::expected<std::vector<uint8_t>> load_key(const std::string& path) {
+  std::vector<uint8_t> key;
+  auto err = read_key(path, key);
+  if (!err.empty())
+    return make_error(ec::invalid_config, err);
+  return key;
+}
+
+std::string read_key(const std::string& path, std::vector<uint8_t>& key) {
+  key.clear();
+  auto fail = [&](const std::string& what) {
+    return path + ": key file " + what;
+  };
+  int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC | O_NOCTTY
+                                  | O_NONBLOCK);
+  if (fd < 0) {
+    auto err = errno;
+    if (err == ELOOP)
+      return fail("is a symbolic link (name the file itself)");
+    return fail(std::string{"cannot be opened: "} + std::strerror(err));
+  }
+  struct closer {
+    int fd;
+    ~closer() {
+      ::close(fd);
+    }
+  } guard{fd};
+  struct stat st;
+  if (::fstat(fd, &st) != 0)
+    return fail(std::string{"cannot be examined: "} + std::strerror(errno));
+  if (!S_ISREG(st.st_mode))
+    return fail("is not a regular file");
+  if (st.st_uid != ::geteuid())
+    return fail("is owned by uid " + std::to_string(st.st_uid)
+                + ", not by this user (uid " + std::to_string(::geteuid())
+                + ")");
+  if ((st.st_mode & 077) != 0)
+    return fail("has mode " + octal(st.st_mode)
+                + ": group or others may access it (chmod 600)");
+  if (st.st_size > max_key_file)
+    return fail("is " + std::to_string(st.st_size) + " bytes, at most "
+                + std::to_string(max_key_file));
+  std::string text(static_cast<size_t>(st.st_size), '\0');
+  size_t got = 0;
+  while (got < text.size()) {
+    auto n = ::read(fd, &text[got], text.size() - got);
+    if (n < 0 && errno == EINTR)
+      continue;
+    if (n < 0)
+      return fail(std::string{"cannot be read: "} + std::strerror(errno));
+    if (n == 0)
+      break;
+    got += static_cast<size_t>(n);
+  }
+  text.resize(got);
+  if (!text.empty() && text.back() == '\n')
+    text.pop_back();
+  if (!text.empty() && text.back() == '\r')
+    text.pop_back();
+  for (auto c : text)
+    if (hex_value(c) < 0)
+      return fail("must hold hex digits only (e.g. made with "
+                  "'openssl rand -hex 32')");
+  if (text.size() % 2 != 0)
+    return fail("holds an odd number of hex digits");
+  auto bytes = text.size() / 2;
+  if (bytes < min_key_bytes || bytes > max_key_bytes)
+    return fail("holds a key of " + std::to_string(bytes) + " bytes, expected "
+                + std::to_string(min_key_bytes) + " to "
+                + std::to_string(max_key_bytes));
+  key.resize(bytes);
+  for (size_t i = 0; i < bytes; ++i)
+    key[i] = static_cast<uint8_t>(hex_value(text[2 * i]) << 4
+                                  | hex_value(text[2 * i + 1]));
+  OPENSSL_cleanse(&text[0], text.size());
+  return {};
+}
+
+// -- policy ----------------------------------------------------------------------
+
+bool data_needs_auth(const auth_config& cfg, module_id dst, uint8_t protocol,
+                     const uint8_t* payload, size_t size) {
+  if (!cfg.enabled())
+    return false;
+  if (cfg.data == auth_data::all || dst == broadcast_module)
+    return true;
+  return protocol == discovery_protocol && size >= 2 && payload != nullptr
+         && payload[1] == discovery_answer_kind;
+}
+
+// -- results ---------------------------------------------------------------------
+
+const char* to_string(auth_result x) {
+  switch (x) {
+    case auth_result::ok:
+      return "ok";
+    case auth_result::truncated:
+      return "truncated";
+    case auth_result::wrong_key_id:
+      return "wrong_key_id";
+    case auth_result::bad_tag:
+      return "bad_tag";
+    case auth_result::replayed:
+      return "replayed";
+    case auth_result::table_full:
+      return "table_full";
+  }
+  return "?";
+}
+
+// -- authenticator ---------------------------------------------------------------
+
+struct authenticator::impl {
+  EVP_MAC* mac = nullptr;
+  /// Initialised with the key; duplicated per packet.
+  EVP_MAC_CTX* keyed = nullptr;
+
+  ~impl() {
+    EVP_MAC_CTX_free(keyed);
+    EVP_MAC_free(mac);
+  }
+};
+
+authenticator::authenticator(auth_config cfg, uint32_t index)
+  : cfg_(std::move(cfg)), index_(index), impl_(std::make_unique<impl>()) {
+  if (cfg_.tag_bytes != 16)
+    cfg_.tag_bytes = 8;
+  impl_->mac = EVP_MAC_fetch(nullptr, "HMAC", nullptr);
+  if (impl_->mac != nullptr)
+    impl_->keyed = EVP_MAC_CTX_new(impl_->mac);
+  if (impl_->keyed != nullptr) {
+    char digest[] = "SHA256";
+    OSSL_PARAM params[] = {
+      OSSL_PARAM_construct_utf8_string(OSSL_MAC_PARAM_DIGEST, digest, 0),
+      OSSL_PARAM_construct_end(),
+    };
+    if (EVP_MAC_init(impl_->keyed, cfg_.key.data(), cfg_.key.size(), params)
+        != 1) {
+      EVP_MAC_CTX_free(impl_->keyed);
+      impl_->keyed = nullptr;
+    }
+  }
+}
+
+authenticator::~authenticator() {
+  if (!cfg_.key.empty())
+    OPENSSL_cleanse(cfg_.key.data(), cfg_.key.size());
+}
+
+bool authenticator::mac(uint8_t link, const uint8_t* data, size_t size,
+                        std::array<uint8_t, 32>& out) {
+  out.fill(0);
+  if (impl_->keyed == nullptr)
+    return false;
+  auto* ctx = EVP_MAC_CTX_dup(impl_->keyed);
+  if (ctx == nullptr)
+    return false;
+  // Pseudo-header: domain string and the link code (RFC 8967 binds the
+  // link addresses; see docs/protocol.md for what HERM binds and why).
+  static constexpr uint8_t domain[] = {'H', 'E', 'R', 'M', '-', 'A', '1'};
+  size_t len = 0;
+  bool ok = EVP_MAC_update(ctx, domain, sizeof(domain)) == 1
+            && EVP_MAC_update(ctx, &link, 1) == 1
+            && EVP_MAC_update(ctx, data, size) == 1
+            && EVP_MAC_final(ctx, out.data(), &len, out.size()) == 1
+            && len == out.size();
+  EVP_MAC_CTX_free(ctx);
+  return ok;
+}
+
+void authenticator::sign(byte_buffer& packet, uint8_t link) {
+  packet.push_back(cfg_.key_id);
+  for (int i = 0; i < 4; ++i)
+    packet.push_back(static_cast<uint8_t>(index_ >> (8 * i)));
+  auto pc = counter_++;
+  for (int i = 0; i < 8; ++i)
+    packet.push_back(static_cast<uint8_t>(pc >> (8 * i)));
+  // Without a working HMAC the tag is zeros, which every receiver refuses
+  // (verify refuses whatever it cannot compute).
+  std::array<uint8_t, 32> tag;
+  mac(link, packet.data(), packet.size(), tag);
+  packet.insert(packet.end(), tag.begin(), tag.begin() + cfg_.tag_bytes);
+  ++stats_.signed_packets;
+}
+
+auth_result authenticator::verify(const uint8_t* data, size_t size,
+                                  uint8_t link, time_point now,
+                                  size_t& body_size, size_t min_body) {
+  auto count = [&](auth_result r) {
+    switch (r) {
+      case auth_result::ok:
+        ++stats_.accepted;
+        break;
+      case auth_result::truncated:
+        ++stats_.truncated;
+        break;
+      case auth_result::wrong_key_id:
+        ++stats_.wrong_key_id;
+        break;
+      case auth_result::bad_tag:
+        ++stats_.bad_tag;
+        break;
+      case auth_result::replayed:
+        ++stats_.replayed;
+        break;
+      case auth_result::table_full:
+        ++stats_.table_full;
+        break;
+    }
+    return r;
+  };
+  auto trailer = cfg_.trailer_size();
+  if (data == nullptr || size < trailer || size - trailer < min_body)
+    return count(auth_result::truncated);
+  auto body = size - trailer;
+  const uint8_t* t = data + body;
+  if (t[0] != cfg_.key_id)
+    return count(auth_result::wrong_key_id);
+  uint32_t index = 0;
+  for (int i = 0; i < 4; ++i)
+    index |= uint32_t{t[1 + i]} << (8 * i);
+  uint64_t pc = 0;
+  for (int i = 0; i < 8; ++i)
+    pc |= uint64_t{t[5 + i]} << (8 * i);
+  std::array<uint8_t, 32> want;
+  if (!mac(link, data, body + auth_head_size, want))
+    return count(auth_result::bad_tag);
+  if (CRYPTO_memcmp(want.data(), t + auth_head_size, cfg_.tag_bytes) != 0)
+    return count(auth_result::bad_tag);
+  // Only packets with a right tag touch the replay table, so a module
+  // without the key can neither fill it nor advance a counter.
+  auto i = senders_.find(index);
+  if (i != senders_.end()) {
+    if (pc <= i->second.counter)
+      return count(auth_result::replayed);
+  } else if (senders_.size() >= cfg_.max_senders) {
+    auto oldest = senders_.end();
+    for (auto j = senders_.begin(); j != senders_.end(); ++j)
+      if (oldest == senders_.end() || j->second.last < oldest->second.last)
+        oldest = j;
+    if (oldest == senders_.end() || now - oldest->second.last < cfg_.forget_after)
+      return count(auth_result::table_full);
+    senders_.erase(oldest);
+  }
+  auto& s = senders_[index];
+  s.counter = pc;
+  s.last = now;
+  body_size = body;
+  return count(auth_result::ok);
+}
+
+} // namespace herm
