@@ -2,6 +2,8 @@
 // caf::io::middleman on 127.0.0.1 (TCP, CAF's BASP protocol), the client
 // gets a handle with remote_actor and runs the same event-based client as
 // herm (actor_client.hpp). What a CAF user picks to talk between processes.
+// oneway: the server publishes the counting actor instead, which sends its
+// acknowledgements to the hello's sender (a BASP proxy of the client).
 
 #include <unistd.h>
 
@@ -22,7 +24,8 @@ namespace herm::bench {
 namespace {
 
 void configure_system(caf::actor_system_config& cfg, const std::string& policy) {
-  configure(cfg, policy);
+  auto [name, threads] = split_policy(policy);
+  configure(cfg, name, threads);
   cfg.add_message_types<caf::id_block::herm_bench>();
   cfg.load<caf::io::middleman>();
 }
@@ -33,7 +36,8 @@ int caf_server(const endpoint_params& p) {
   caf::actor_system_config cfg;
   configure_system(cfg, p.policy);
   caf::actor_system sys{cfg};
-  auto echo = sys.spawn(echo_actor);
+  auto echo = p.mode == "oneway" ? sys.spawn(count_actor, p, app_support_actor{})
+                                 : sys.spawn(echo_actor);
   auto port = sys.middleman().publish(echo, p.port, "127.0.0.1");
   if (!port) {
     std::cout << "error publish: " << render(port.error()) << std::endl;
@@ -53,6 +57,11 @@ client_result caf_client(const endpoint_params& p) {
   if (!echo) {
     res.error = "remote_actor: " + render(echo.error());
     return res;
+  }
+  if (p.mode == "oneway") {
+    auto done = std::make_shared<std::promise<client_result>>();
+    auto fut = done->get_future();
+    return run_oneway_client(spawn_oneway_client(sys, *echo, p, done), std::move(fut));
   }
   return run_actor_client(sys, *echo, p, false);
 }

@@ -1,10 +1,17 @@
-// herm-bench-rtt: request round-trip latency between two processes on
-// 127.0.0.1, for HERM and for the systems a robot builder would pick
-// instead, in one run (issue 7, "Benchmarks side by side with peers").
+// herm-bench-rtt: request round-trip latency and one-way throughput between
+// processes on 127.0.0.1, for HERM and for the systems a robot builder would
+// pick instead, in one run (issue 7, "Benchmarks side by side with peers").
 //
 //   herm-bench-rtt                       the full default suite (minutes)
 //   herm-bench-rtt --quick               a smoke run (seconds)
 //   herm-bench-rtt --only herm,udp --sizes 16 --repeat 5 --json rtt.json
+//   herm-bench-rtt --modes oneway,router --policies sharing:1
+//
+// Modes: back-to-back and gap-10ms (request round trips between two
+// processes), oneway (messages per second at the receiver under a credit
+// window, 64 bytes by default), inprocess (round trips between two actors of
+// one process: through HERM's application support layer, and plain CAF),
+// router (HERM round trips across a third process, a router module).
 //
 // For every case (transport, payload size, back to back or with a gap) and
 // every repetition, this process starts a fresh server and a fresh client
@@ -54,26 +61,34 @@ namespace {
 /// One transport as measured: a family (the server and client functions)
 /// and, for the actor transports, a scheduler policy.
 struct variant {
-  std::string name;   // "herm/sharing"
+  std::string name;   // "herm/sharing:1"
   std::string family; // "herm"
-  std::string policy; // "sharing", "stealing" or empty
+  std::string policy; // "sharing:1", "sharing", "stealing" or empty
   std::string label;  // for people
+  bool batch = false; // udp oneway: sendmmsg
 };
 
 struct mode {
-  std::string name; // "back-to-back", "gap-10ms"
+  std::string name; // "back-to-back", "gap-10ms", "oneway", "inprocess", "router"
+  std::string kind; // what the endpoints do: "rtt", "oneway", "inprocess", "router"
   std::chrono::microseconds gap;
   uint32_t count;
   uint32_t warmup;
+  bool latency() const {
+    return kind != "oneway";
+  }
 };
 
 struct run_figures {
   double p50 = 0, p99 = 0, min = 0, max = 0, mean = 0; // µs
   size_t n = 0;
+  // oneway
+  double msgs_per_s = 0, client_allocs = -1, server_allocs = -1;
+  uint64_t sent = 0, received = 0, lost = 0, stalls = 0;
 };
 
 struct case_result {
-  const variant* v = nullptr;
+  variant v;
   const mode* m = nullptr;
   size_t size = 0;
   std::vector<run_figures> runs;
@@ -220,28 +235,73 @@ std::vector<std::string> endpoint_args(const std::string& exe, const std::string
   return {exe,
           "--role", role,
           "--transport", p.transport,
+          "--mode", p.mode,
           "--policy", p.policy.empty() ? std::string{"sharing"} : p.policy,
           "--port", std::to_string(p.port),
           "--port2", std::to_string(p.port2),
+          "--port3", std::to_string(p.port3),
+          "--port4", std::to_string(p.port4),
           "--hello-ms", std::to_string(p.hello.count()),
           "--size", std::to_string(p.size),
           "--count", std::to_string(p.count),
           "--warmup", std::to_string(p.warmup),
           "--gap-us", std::to_string(p.gap.count()),
           "--timeout-ms", std::to_string(p.timeout.count()),
+          "--window", std::to_string(p.window),
+          "--ack-every", std::to_string(p.ack_every),
+          "--stall-ms", std::to_string(p.stall.count()),
+          "--batch", p.batch ? "1" : "0",
           "--tag", p.tag};
 }
 
-/// One repetition of one case: a fresh server, a fresh client.
-std::variant<std::vector<int64_t>, std::string>
-run_pair(const std::string& exe, endpoint_params p) {
+/// Distinct free UDP ports.
+std::vector<uint16_t> free_udp_ports(size_t n) {
+  std::vector<uint16_t> ports;
+  while (ports.size() < n) {
+    auto x = free_udp_port();
+    if (x != 0 && std::find(ports.begin(), ports.end(), x) == ports.end())
+      ports.push_back(x);
+  }
+  return ports;
+}
+
+/// Parses a client's result line ("rtt N t1 .. tN" or "oneway SENT RECEIVED
+/// ELAPSED_NS STALLS CLIENT_ALLOCS SERVER_ALLOCS").
+std::variant<client_result, std::string> parse_result(const std::string& out) {
+  client_result res;
+  if (out.rfind("rtt ", 0) == 0) {
+    std::istringstream in{out.substr(4)};
+    size_t n = 0;
+    in >> n;
+    res.rtt_ns.resize(n);
+    for (auto& x : res.rtt_ns)
+      in >> x;
+    if (!in)
+      return std::string{"client: truncated result"};
+    return res;
+  }
+  if (out.rfind("oneway ", 0) == 0) {
+    std::istringstream in{out.substr(7)};
+    in >> res.sent >> res.received >> res.elapsed_ns >> res.stalls >> res.client_allocs
+      >> res.server_allocs;
+    if (!in)
+      return std::string{"client: truncated result"};
+    return res;
+  }
+  return "client: " + out;
+}
+
+/// One repetition of one case: fresh processes (a router, a server, a client
+/// as the mode needs).
+std::variant<client_result, std::string> run_pair(const std::string& exe, endpoint_params p) {
   static int serial = 0;
   ++serial;
-  if (p.transport == "herm") {
-    p.port = free_udp_port();
-    do
-      p.port2 = free_udp_port();
-    while (p.port2 == p.port);
+  if (p.transport == "herm" || p.mode == "inprocess") {
+    auto ports = free_udp_ports(4);
+    p.port = ports[0];
+    p.port2 = ports[1];
+    p.port3 = ports[2];
+    p.port4 = ports[3];
   } else if (p.transport == "dds") {
     // A domain and topic names of our own: other DDS programs on this
     // machine neither see nor disturb this run.
@@ -250,39 +310,54 @@ run_pair(const std::string& exe, endpoint_params p) {
   } else {
     p.port = 0;
   }
-  auto server = spawn(endpoint_args(exe, "server", p));
-  if (!server)
-    return std::string{"cannot start the server"};
-  auto line = read_line(*server, std::chrono::steady_clock::now() + 30s);
-  if (!line || line->rfind("ready ", 0) != 0) {
-    stop(*server);
-    return "server: " + (line ? *line : std::string{"no ready line within 30 s"});
-  }
-  p.port = static_cast<uint16_t>(std::stoul(line->substr(6)));
+  std::vector<child> helpers; // router, server
+  auto stop_all = [&] {
+    for (auto i = helpers.rbegin(); i != helpers.rend(); ++i)
+      stop(*i);
+  };
+  auto start_helper = [&](const std::string& role) -> std::string {
+    auto c = spawn(endpoint_args(exe, role, p));
+    if (!c)
+      return "cannot start the " + role;
+    helpers.push_back(*c);
+    auto line = read_line(helpers.back(), std::chrono::steady_clock::now() + 30s);
+    if (!line || line->rfind("ready ", 0) != 0)
+      return role + ": " + (line ? *line : std::string{"no ready line within 30 s"});
+    if (role == "server") {
+      // "ready PORT [PORT2]": the second port is zmq's acknowledgement port.
+      std::istringstream in{line->substr(6)};
+      unsigned a = 0, b = 0;
+      in >> a;
+      p.port = static_cast<uint16_t>(a);
+      if (in >> b)
+        p.port2 = static_cast<uint16_t>(b);
+    }
+    return {};
+  };
+  if (p.mode == "router")
+    if (auto err = start_helper("router"); !err.empty()) {
+      stop_all();
+      return err;
+    }
+  if (p.mode != "inprocess")
+    if (auto err = start_helper("server"); !err.empty()) {
+      stop_all();
+      return err;
+    }
   auto client = spawn(endpoint_args(exe, "client", p));
   if (!client) {
-    stop(*server);
+    stop_all();
     return std::string{"cannot start the client"};
   }
   auto budget = 60s + (p.warmup + p.count)
                         * std::chrono::duration_cast<std::chrono::milliseconds>(
-                          p.gap + std::chrono::milliseconds(5));
+                          p.gap + std::chrono::milliseconds(p.mode == "oneway" ? 1 : 5));
   auto out = read_line(*client, std::chrono::steady_clock::now() + budget);
   stop(*client);
-  stop(*server);
+  stop_all();
   if (!out)
     return std::string{"client: no result within the time budget"};
-  if (out->rfind("rtt ", 0) != 0)
-    return "client: " + *out;
-  std::istringstream in{out->substr(4)};
-  size_t n = 0;
-  in >> n;
-  std::vector<int64_t> ns(n);
-  for (auto& x : ns)
-    in >> x;
-  if (!in)
-    return std::string{"client: truncated result"};
-  return ns;
+  return parse_result(*out);
 }
 
 // -- the child roles -----------------------------------------------------------------
@@ -293,22 +368,39 @@ int run_endpoint(const std::string& role, const endpoint_params& p) {
     {"caf", {caf_server, caf_client}},   {"zmq", {zmq_server, zmq_client}},
     {"dds", {dds_server, dds_client}},
   };
-  auto i = fns.find(p.transport);
-  if (i == fns.end()) {
-    std::cout << "error unknown transport '" << p.transport << "'" << std::endl;
-    return 2;
+  if (p.mode == "oneway")
+    alloc_counting(true);
+  if (role == "router")
+    return herm_router(p);
+  client_result res;
+  if (p.mode == "inprocess" && role == "client") {
+    res = inprocess_client(p);
+  } else {
+    auto i = fns.find(p.transport);
+    if (i == fns.end()) {
+      std::cout << "error unknown transport '" << p.transport << "'" << std::endl;
+      return 2;
+    }
+    if (role == "server")
+      return i->second.first(p);
+    res = i->second.second(p);
   }
-  if (role == "server")
-    return i->second.first(p);
-  auto res = i->second.second(p);
   if (!res.error.empty()) {
     std::cout << "error " << res.error << std::endl;
     std::cout.flush();
     ::_exit(1); // some libraries' threads would outlive a normal exit
   }
-  std::string line = "rtt " + std::to_string(res.rtt_ns.size());
-  for (auto x : res.rtt_ns)
-    line += " " + std::to_string(x);
+  std::string line;
+  if (p.mode == "oneway") {
+    std::ostringstream out;
+    out << "oneway " << res.sent << " " << res.received << " " << res.elapsed_ns << " "
+        << res.stalls << " " << res.client_allocs << " " << res.server_allocs;
+    line = out.str();
+  } else {
+    line = "rtt " + std::to_string(res.rtt_ns.size());
+    for (auto x : res.rtt_ns)
+      line += " " + std::to_string(x);
+  }
   std::cout << line << std::endl;
   std::cout.flush();
   ::_exit(0);
@@ -341,76 +433,179 @@ std::string fmt(double x) {
   return buf;
 }
 
+/// A case over its runs: medians, with the min and max over runs where
+/// asked for.
 struct summary {
   double p50 = 0, p50_min = 0, p50_max = 0, p99 = 0, min = 0, max = 0;
+  double msgs = 0, msgs_min = 0, msgs_max = 0, lost = 0, stalls = 0;
+  double client_allocs = -1, server_allocs = -1;
 };
+
+double min_of(const std::vector<double>& xs) {
+  return xs.empty() ? 0 : *std::min_element(xs.begin(), xs.end());
+}
+
+double max_of(const std::vector<double>& xs) {
+  return xs.empty() ? 0 : *std::max_element(xs.begin(), xs.end());
+}
 
 summary summarize(const case_result& c) {
   summary s;
-  std::vector<double> p50s, p99s;
+  if (c.runs.empty())
+    return s;
+  std::vector<double> p50s, p99s, msgs, lost, stalls, ca, sa;
   s.min = 1e300;
   for (auto& r : c.runs) {
     p50s.push_back(r.p50);
     p99s.push_back(r.p99);
     s.min = std::min(s.min, r.min);
     s.max = std::max(s.max, r.max);
+    msgs.push_back(r.msgs_per_s);
+    lost.push_back(static_cast<double>(r.lost));
+    stalls.push_back(static_cast<double>(r.stalls));
+    ca.push_back(r.client_allocs);
+    sa.push_back(r.server_allocs);
   }
-  if (p50s.empty())
-    return {};
   s.p50 = median(p50s);
-  s.p50_min = *std::min_element(p50s.begin(), p50s.end());
-  s.p50_max = *std::max_element(p50s.begin(), p50s.end());
+  s.p50_min = min_of(p50s);
+  s.p50_max = max_of(p50s);
   s.p99 = median(p99s);
+  s.msgs = median(msgs);
+  s.msgs_min = min_of(msgs);
+  s.msgs_max = max_of(msgs);
+  s.lost = median(lost);
+  s.stalls = median(stalls);
+  s.client_allocs = median(ca);
+  s.server_allocs = median(sa);
   return s;
+}
+
+/// "sharing:1" -> "sharing scheduler, 1 worker".
+std::string policy_label(const std::string& policy) {
+  auto [name, threads] = split_policy(policy);
+  if (threads == 0)
+    return name + " scheduler, one worker per core ("
+           + std::to_string(std::thread::hardware_concurrency()) + ")";
+  return name + " scheduler, " + std::to_string(threads)
+         + (threads == 1 ? " worker" : " workers");
+}
+
+bool has(const std::vector<std::string>& xs, const std::string& x) {
+  return std::find(xs.begin(), xs.end(), x) != xs.end();
+}
+
+/// The variants a mode measures, of the families selected.
+std::vector<variant> variants_for(const mode& m, const std::vector<std::string>& families,
+                                  const std::vector<std::string>& policies) {
+  std::vector<variant> out;
+  auto actor = [&](const std::string& family, const std::string& what) {
+    for (auto& pol : policies)
+      out.push_back({family + "/" + pol, family, pol, what + ", " + policy_label(pol)});
+  };
+  if (m.kind == "inprocess") {
+    if (has(families, "herm")) {
+      actor("herm", "HERM in one process: proxy bound by name on the same module "
+                    "(a local match: the APO itself)");
+      actor("herm-rebind", "HERM in one process: rebinding proxy bound by name on the "
+                           "same module (through the application support actor)");
+    }
+    if (has(families, "caf"))
+      actor("caf-local", "plain CAF request to the echo actor in one process");
+    return out;
+  }
+  if (m.kind == "router") {
+    if (has(families, "herm"))
+      actor("herm", "HERM APO request across a router module (udp A-R, R-B)");
+    return out;
+  }
+  bool oneway = m.kind == "oneway";
+  for (auto& f : families) {
+    if (f == "udp") {
+      if (oneway) {
+        out.push_back({"udp", "udp", "", "raw UDP, one blocking socket, send loop (the floor)"});
+        out.push_back({"udp/sendmmsg", "udp", "",
+                       "raw UDP, one blocking socket, sendmmsg batches of up to 64", true});
+      } else {
+        out.push_back({"udp", "udp", "", "raw UDP, blocking sockets (the floor)"});
+      }
+    } else if (f == "herm") {
+      actor("herm", oneway ? "HERM one-way send through a proxy to a counting APO, udp link"
+                           : "HERM APO request through a proxy, udp link");
+    } else if (f == "caf") {
+      actor("caf", oneway ? "CAF 0.17 io::middleman remote actor (TCP), one-way send"
+                          : "CAF 0.17 io::middleman remote actor (TCP)");
+    } else if (f == "zmq") {
+      out.push_back({"zmq", "zmq", "", oneway ? "ZeroMQ PUSH/PULL (TCP)" : "ZeroMQ REQ/REP (TCP)"});
+    } else if (f == "dds") {
+      out.push_back({"dds", "dds", "",
+                     oneway ? "Cyclone DDS, reliable, keep-all" : "Cyclone DDS, reliable, keep-last 1"});
+    }
+  }
+  return out;
 }
 
 } // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"herm-bench-rtt: request round trips between two processes on "
-               "127.0.0.1, HERM and its peers side by side"};
+  CLI::App app{"herm-bench-rtt: request round trips and one-way throughput between "
+               "processes on 127.0.0.1, HERM and its peers side by side"};
   std::string role = "run";
   endpoint_params ep;
-  uint32_t hello_ms = 1000, gap_us = 0, timeout_ms = 2000;
-  std::string only, sizes_arg = "16,256,1400", policies_arg = "sharing,stealing";
+  uint32_t hello_ms = 1000, gap_us = 0, timeout_ms = 2000, stall_ms = 100;
+  std::string only, sizes_arg = "16,256,1400", policies_arg = "sharing:1,sharing,stealing";
+  std::string modes_arg, oneway_sizes_arg = "64";
   std::string json_path;
   uint32_t count = 2000, warmup = 200, gap_count = 300, gap_warmup = 20;
+  uint32_t oneway_count = 20000, oneway_warmup = 1000;
   uint32_t gap_ms = 10, repeat = 3;
+  int batch = 0;
   bool quick = false;
   app.add_option("--only", only, "transports to run, comma-separated: udp,herm,caf,zmq,dds (default: all)");
-  app.add_option("--sizes", sizes_arg, "payload sizes in bytes (16,256,1400)");
-  app.add_option("--policies", policies_arg, "CAF scheduler policies for herm and caf (sharing,stealing)");
-  app.add_option("--count", count, "measured round trips back to back (2000)");
+  app.add_option("--modes", modes_arg, "modes to run, comma-separated: back-to-back,gap,oneway,inprocess,router (default: all)");
+  app.add_option("--sizes", sizes_arg, "payload sizes in bytes of every mode (latency modes: 16,256,1400; oneway: 64)");
+  app.add_option("--policies", policies_arg, "CAF schedulers for herm and caf, POLICY[:THREADS] (sharing:1,sharing,stealing; sharing:1 = one worker, sharing = one per core)");
+  app.add_option("--count", count, "measured round trips back to back, inprocess and router (2000)");
   app.add_option("--warmup", warmup, "unmeasured round trips before them (200)");
   app.add_option("--gap-count", gap_count, "measured round trips with a gap (300)");
   app.add_option("--gap-warmup", gap_warmup, "unmeasured ones before them (20)");
   app.add_option("--gap-ms", gap_ms, "the gap after each reply, ms (10)");
+  app.add_option("--oneway-count", oneway_count, "oneway: measured messages per run (20000)");
+  app.add_option("--oneway-warmup", oneway_warmup, "oneway: unmeasured messages before them (1000)");
+  app.add_option("--window", ep.window, "oneway: most unacknowledged messages (128)");
+  app.add_option("--ack-every", ep.ack_every, "oneway: the receiver acknowledges every N messages (16)");
+  app.add_option("--stall-ms", stall_ms, "oneway: a window full for this long is reopened and counted as a stall (100)");
   app.add_option("--repeat", repeat, "repetitions of every case (3)");
   app.add_option("--json", json_path, "write every figure to this file");
-  app.add_flag("--quick", quick, "a short smoke run: 256 bytes, 1 repetition, few round trips, 100 ms hellos");
+  app.add_flag("--quick", quick, "a short smoke run: 256 bytes (oneway 64), 1 repetition, few round trips, 100 ms hellos");
   app.add_option("--hello-ms", hello_ms, "herm: routing hello interval, ms (1000, HERM's default)");
   app.add_option("--timeout-ms", timeout_ms, "a round trip slower than this fails the case (2000)");
   // The child roles (the orchestrator starts them).
-  app.add_option("--role", role, "run (default), or server/client: one end of one case")->group("");
+  app.add_option("--role", role, "run (default), or server/client/router: one end of one case")->group("");
   app.add_option("--transport", ep.transport)->group("");
+  app.add_option("--mode", ep.mode)->group("");
   app.add_option("--policy", ep.policy)->group("");
   app.add_option("--port", ep.port)->group("");
   app.add_option("--port2", ep.port2)->group("");
+  app.add_option("--port3", ep.port3)->group("");
+  app.add_option("--port4", ep.port4)->group("");
   app.add_option("--size", ep.size)->group("");
   app.add_option("--gap-us", gap_us)->group("");
+  app.add_option("--batch", batch)->group("");
   app.add_option("--tag", ep.tag)->group("");
   CLI11_PARSE(app, argc, argv);
   ep.hello = std::chrono::milliseconds(hello_ms);
   ep.timeout = std::chrono::milliseconds(timeout_ms);
+  ep.stall = std::chrono::milliseconds(stall_ms);
+  ep.batch = batch != 0;
 
-  if (role == "server" || role == "client") {
+  if (role == "server" || role == "client" || role == "router") {
     ep.count = count;
     ep.warmup = warmup;
     ep.gap = std::chrono::microseconds(gap_us);
     return run_endpoint(role, ep);
   }
   if (role != "run") {
-    std::cerr << "--role must be run, server or client" << std::endl;
+    std::cerr << "--role must be run, server, client or router" << std::endl;
     return 2;
   }
   ::signal(SIGPIPE, SIG_IGN);
@@ -426,54 +621,91 @@ int main(int argc, char** argv) {
       gap_count = 10;
     if (app.count("--gap-warmup") == 0)
       gap_warmup = 2;
+    if (app.count("--oneway-count") == 0)
+      oneway_count = 2000;
+    if (app.count("--oneway-warmup") == 0)
+      oneway_warmup = 200;
     if (app.count("--repeat") == 0)
       repeat = 1;
     if (app.count("--hello-ms") == 0)
       ep.hello = 100ms; // the modules find each other sooner
   }
-  std::vector<size_t> sizes;
-  for (auto& s : split(sizes_arg)) {
-    auto n = std::stoul(s);
-    if (n < 4 || n > 1400) {
-      std::cerr << "--sizes: " << s << " is not in 4..1400 (one datagram)" << std::endl;
-      return 2;
-    }
-    sizes.push_back(n);
+  if (ep.window == 0 || ep.ack_every == 0 || ep.ack_every > ep.window) {
+    std::cerr << "--window and --ack-every must be positive, --ack-every at most --window"
+              << std::endl;
+    return 2;
   }
+  auto parse_sizes = [](const std::string& arg, std::vector<size_t>& out) {
+    for (auto& s : split(arg)) {
+      size_t n = 0;
+      try {
+        n = std::stoul(s);
+      } catch (const std::exception&) {
+      }
+      if (n < 4 || n > 1400) {
+        std::cerr << "--sizes: " << s << " is not in 4..1400 (one datagram)" << std::endl;
+        return false;
+      }
+      out.push_back(n);
+    }
+    return true;
+  };
+  std::vector<size_t> sizes, oneway_sizes;
+  if (!parse_sizes(sizes_arg, sizes)
+      || !parse_sizes(app.count("--sizes") > 0 ? sizes_arg : oneway_sizes_arg, oneway_sizes))
+    return 2;
   auto families = only.empty() ? std::vector<std::string>{"udp", "herm", "caf", "zmq", "dds"}
                                : split(only);
-  auto policies = split(policies_arg);
-  std::vector<variant> variants;
   std::vector<std::pair<std::string, std::string>> skipped;
+  std::vector<std::string> available;
   for (auto& f : families) {
-    if (f == "udp") {
-      variants.push_back({"udp", "udp", "", "raw UDP, blocking sockets (the floor)"});
-    } else if (f == "herm" || f == "caf") {
-      for (auto& pol : policies)
-        variants.push_back(
-          {f + "/" + pol, f, pol,
-           f == "herm" ? "HERM APO request through a proxy, udp link, " + pol + " scheduler"
-                       : "CAF 0.17 io::middleman remote actor (TCP), " + pol + " scheduler"});
-    } else if (f == "zmq") {
-      if (auto why = zmq_unavailable(); !why.empty())
-        skipped.emplace_back("zmq", why);
-      else
-        variants.push_back({"zmq", "zmq", "", "ZeroMQ REQ/REP (TCP)"});
-    } else if (f == "dds") {
-      if (auto why = dds_unavailable(); !why.empty())
-        skipped.emplace_back("dds", why);
-      else
-        variants.push_back({"dds", "dds", "", "Cyclone DDS, reliable, keep-last 1"});
-    } else {
+    if (f == "zmq" && !zmq_unavailable().empty())
+      skipped.emplace_back("zmq", zmq_unavailable());
+    else if (f == "dds" && !dds_unavailable().empty())
+      skipped.emplace_back("dds", dds_unavailable());
+    else if (f == "udp" || f == "herm" || f == "caf" || f == "zmq" || f == "dds")
+      available.push_back(f);
+    else {
       std::cerr << "--only: unknown transport '" << f << "'" << std::endl;
       return 2;
     }
   }
-  std::vector<mode> modes{
-    {"back-to-back", 0us, count, warmup},
-    {"gap-" + std::to_string(gap_ms) + "ms",
-     std::chrono::microseconds(gap_ms * 1000), gap_count, gap_warmup},
+  auto policies = split(policies_arg);
+  for (auto& pol : policies) {
+    auto [name, threads] = std::pair<std::string, size_t>{};
+    try {
+      std::tie(name, threads) = split_policy(pol);
+    } catch (const std::exception&) {
+      name.clear();
+    }
+    if (name != "sharing" && name != "stealing") {
+      std::cerr << "--policies: '" << pol << "' is not sharing or stealing[:THREADS]" << std::endl;
+      return 2;
+    }
+  }
+  auto gap_name = "gap-" + std::to_string(gap_ms) + "ms";
+  std::vector<mode> all_modes{
+    {"back-to-back", "rtt", 0us, count, warmup},
+    {gap_name, "rtt", std::chrono::microseconds(gap_ms * 1000), gap_count, gap_warmup},
+    {"oneway", "oneway", 0us, oneway_count, oneway_warmup},
+    {"inprocess", "inprocess", 0us, count, warmup},
+    {"router", "router", 0us, count, warmup},
   };
+  std::vector<mode> modes;
+  if (modes_arg.empty()) {
+    modes = all_modes;
+  } else {
+    auto wanted = split(modes_arg);
+    for (auto& w : wanted)
+      if (w != "gap" && std::none_of(all_modes.begin(), all_modes.end(),
+                                     [&](const mode& m) { return m.name == w; })) {
+        std::cerr << "--modes: unknown mode '" << w << "'" << std::endl;
+        return 2;
+      }
+    for (auto& m : all_modes)
+      if (has(wanted, m.name) || (m.name == gap_name && has(wanted, "gap")))
+        modes.push_back(m);
+  }
 
   std::string command;
   for (int i = 0; i < argc; ++i)
@@ -486,102 +718,203 @@ int main(int argc, char** argv) {
   // every transport alike.
   std::vector<case_result> results;
   for (auto& m : modes)
-    for (auto size : sizes)
-      for (auto& v : variants)
-        results.push_back({&v, &m, size, {}, {}});
+    for (auto size : m.kind == "oneway" ? oneway_sizes : sizes)
+      for (auto& v : variants_for(m, available, policies))
+        results.push_back({v, &m, size, {}, {}});
   auto exe = self_exe();
   size_t total = results.size() * repeat, done = 0;
   for (uint32_t r = 0; r < repeat; ++r) {
     for (auto& c : results) {
       endpoint_params p = ep;
-      p.transport = c.v->family;
-      p.policy = c.v->policy;
+      p.transport = c.v.family;
+      p.mode = c.m->kind;
+      p.policy = c.v.policy;
+      p.batch = c.v.batch;
       p.size = c.size;
       p.count = c.m->count;
       p.warmup = c.m->warmup;
       p.gap = c.m->gap;
       auto out = run_pair(exe, p);
       ++done;
-      std::cerr << "[" << done << "/" << total << "] " << c.v->name << " "
-                << c.m->name << " " << c.size << " B run " << (r + 1) << ": ";
+      std::cerr << "[" << done << "/" << total << "] " << c.v.name << " " << c.m->name << " "
+                << c.size << " B run " << (r + 1) << ": ";
       if (auto* err = std::get_if<std::string>(&out)) {
         c.errors.push_back(*err);
         std::cerr << "FAILED " << *err << std::endl;
         continue;
       }
-      auto f = summarize(std::get<std::vector<int64_t>>(out));
-      std::cerr << "p50 " << fmt(f.p50) << " us, p99 " << fmt(f.p99) << " us" << std::endl;
+      auto& res = std::get<client_result>(out);
+      run_figures f;
+      if (c.m->kind == "oneway") {
+        f.sent = res.sent;
+        f.received = res.received;
+        f.lost = res.sent > res.received ? res.sent - res.received : 0;
+        f.stalls = res.stalls;
+        f.client_allocs = res.client_allocs;
+        f.server_allocs = res.server_allocs;
+        if (res.received > 1 && res.elapsed_ns > 0)
+          f.msgs_per_s = static_cast<double>(res.received - 1) * 1e9
+                         / static_cast<double>(res.elapsed_ns);
+        std::cerr << fmt(f.msgs_per_s) << " msgs/s, " << f.lost << " lost, " << f.stalls
+                  << " stalls" << std::endl;
+      } else {
+        f = summarize(res.rtt_ns);
+        std::cerr << "p50 " << fmt(f.p50) << " us, p99 " << fmt(f.p99) << " us" << std::endl;
+      }
       c.runs.push_back(f);
     }
   }
 
   // -- the table and the JSON ------------------------------------------------------------
-  std::map<std::pair<std::string, size_t>, double> udp_p50;
+  // Reference figures of the same run: raw UDP (and DDS) per mode and size,
+  // plain CAF per policy and size (inprocess), direct herm per policy and
+  // size (router: the back-to-back case).
+  std::map<std::tuple<std::string, std::string, size_t>, summary> by_name;
   for (auto& c : results)
-    if (c.v->family == "udp" && !c.runs.empty())
-      udp_p50[{c.m->name, c.size}] = summarize(c).p50;
+    if (!c.runs.empty())
+      by_name[{c.v.name, c.m->name, c.size}] = summarize(c);
+  auto ref = [&](const std::string& name, const std::string& mode_name, size_t size) {
+    auto i = by_name.find({name, mode_name, size});
+    return i == by_name.end() ? summary{} : i->second;
+  };
+  auto ratio = [](double a, double b) { return a > 0 && b > 0 ? a / b : 0; };
   nlohmann::json cases = nlohmann::json::array();
   bool ok = true;
-  std::cout << "\nRequest round trip between two processes on 127.0.0.1, microseconds.\n"
-            << "p50: median over " << repeat << " run(s) of each run's p50 [min..max over runs]; "
-            << "p99: median of the runs' p99; min/max: over all round trips of all runs.\n";
+  std::cout << "\nAll figures: the median over " << repeat
+            << " run(s) [min..max over runs]; every run in fresh processes on 127.0.0.1.\n"
+            << "Latency modes, microseconds: p50 of each run, p99: median of the runs' p99, "
+               "min/max: over all round trips of all runs.\n";
   for (auto& m : modes) {
-    std::cout << "\n" << m.name << " (" << m.count << " round trips after " << m.warmup
-              << " warm-up per run, " << repeat << " run(s))\n";
-    std::printf("%-15s %6s %9s %19s %9s %9s %9s %8s\n", "transport", "bytes", "p50",
-                "p50 range", "p99", "min", "max", "p50/udp");
+    bool oneway = m.kind == "oneway";
+    std::string ratio_name = m.kind == "inprocess" ? "ratio_to_caf_local"
+                             : m.kind == "router"  ? "ratio_to_direct"
+                                                   : "ratio_to_udp";
+    if (oneway) {
+      std::cout << "\n" << m.name << " (" << m.count << " messages after " << m.warmup
+                << " warm-up per run, window " << ep.window << ", acknowledged every "
+                << ep.ack_every << "; messages per second at the receiver, first to last)\n";
+      std::printf("%-22s %6s %10s %21s %6s %6s %7s %7s %13s\n", "transport", "bytes", "msgs/s",
+                  "range", "lost", "stalls", "/udp", "/dds", "allocs/msg c+s");
+    } else {
+      std::cout << "\n" << m.name << " (" << m.count << " round trips after " << m.warmup
+                << " warm-up per run)\n";
+      std::printf("%-22s %6s %9s %19s %9s %9s %9s %9s\n", "transport", "bytes", "p50",
+                  "p50 range", "p99", "min", "max",
+                  m.kind == "inprocess" ? "p50/caf" : m.kind == "router" ? "p50/direct" : "p50/udp");
+    }
     std::cout.flush();
-    for (auto size : sizes)
-      for (auto& c : results) {
-        if (c.m != &m || c.size != size)
-          continue;
-        auto s = summarize(c);
-        bool complete = c.errors.empty() && c.runs.size() == repeat;
-        for (auto& r : c.runs)
-          if (!(r.p50 > 0 && r.p99 > 0 && r.min > 0 && r.max > 0 && r.n == m.count))
-            complete = false;
-        ok = ok && complete;
-        auto u = udp_p50.find({m.name, size});
-        double ratio = u != udp_p50.end() && u->second > 0 && s.p50 > 0 ? s.p50 / u->second : 0;
-        if (c.runs.empty()) {
-          std::printf("%-15s %6zu   FAILED: %s\n", c.v->name.c_str(), size,
-                      c.errors.empty() ? "" : c.errors.front().c_str());
-        } else {
-          auto range = fmt(s.p50_min) + ".." + fmt(s.p50_max);
-          std::printf("%-15s %6zu %9s %19s %9s %9s %9s %8s%s\n", c.v->name.c_str(), size,
-                      fmt(s.p50).c_str(), range.c_str(), fmt(s.p99).c_str(),
-                      fmt(s.min).c_str(), fmt(s.max).c_str(),
-                      ratio > 0 ? (fmt(ratio) + "x").c_str() : "-",
-                      complete ? "" : "  (incomplete)");
-        }
-        std::fflush(stdout);
-        nlohmann::json runs = nlohmann::json::array();
-        for (auto& r : c.runs)
+    for (auto& c : results) {
+      if (c.m != &m)
+        continue;
+      auto s = summarize(c);
+      bool complete = c.errors.empty() && c.runs.size() == repeat;
+      for (auto& r : c.runs)
+        if (oneway ? !(r.msgs_per_s > 0 && r.received > 0)
+                   : !(r.p50 > 0 && r.p99 > 0 && r.min > 0 && r.max > 0 && r.n == m.count))
+          complete = false;
+      ok = ok && complete;
+      auto size = c.size;
+      double r_udp = 0, r_dds = 0, r_main = 0;
+      if (oneway) {
+        r_udp = ratio(s.msgs, ref("udp", m.name, size).msgs);
+        r_dds = ratio(s.msgs, ref("dds", m.name, size).msgs);
+      } else if (m.kind == "inprocess") {
+        r_main = ratio(s.p50, ref("caf-local/" + c.v.policy, m.name, size).p50);
+      } else if (m.kind == "router") {
+        r_main = ratio(s.p50, ref(c.v.name, "back-to-back", size).p50);
+      } else {
+        r_main = ratio(s.p50, ref("udp", m.name, size).p50);
+      }
+      auto x = [&](double v) { return v > 0 ? fmt(v) + "x" : std::string{"-"}; };
+      if (c.runs.empty()) {
+        std::printf("%-22s %6zu   FAILED: %s\n", c.v.name.c_str(), size,
+                    c.errors.empty() ? "" : c.errors.front().c_str());
+      } else if (oneway) {
+        auto range = fmt(s.msgs_min) + ".." + fmt(s.msgs_max);
+        auto allocs = s.client_allocs >= 0 && s.server_allocs >= 0
+                        ? fmt(s.client_allocs) + "+" + fmt(s.server_allocs)
+                        : std::string{"-"};
+        std::printf("%-22s %6zu %10s %21s %6s %6s %7s %7s %13s%s\n", c.v.name.c_str(), size,
+                    fmt(s.msgs).c_str(), range.c_str(), fmt(s.lost).c_str(),
+                    fmt(s.stalls).c_str(), x(r_udp).c_str(), x(r_dds).c_str(), allocs.c_str(),
+                    complete ? "" : "  (incomplete)");
+      } else {
+        auto range = fmt(s.p50_min) + ".." + fmt(s.p50_max);
+        std::printf("%-22s %6zu %9s %19s %9s %9s %9s %9s%s\n", c.v.name.c_str(), size,
+                    fmt(s.p50).c_str(), range.c_str(), fmt(s.p99).c_str(), fmt(s.min).c_str(),
+                    fmt(s.max).c_str(), x(r_main).c_str(), complete ? "" : "  (incomplete)");
+      }
+      std::fflush(stdout);
+      nlohmann::json runs = nlohmann::json::array();
+      for (auto& r : c.runs) {
+        if (oneway)
+          runs.push_back({{"msgs_per_s", r.msgs_per_s}, {"sent", r.sent},
+                          {"received", r.received}, {"lost", r.lost}, {"stalls", r.stalls},
+                          {"client_allocs_per_msg", r.client_allocs},
+                          {"server_allocs_per_msg", r.server_allocs}});
+        else
           runs.push_back({{"p50_us", r.p50}, {"p99_us", r.p99}, {"min_us", r.min},
                           {"max_us", r.max}, {"mean_us", r.mean}, {"round_trips", r.n}});
-        cases.push_back({{"transport", c.v->name},
-                         {"family", c.v->family},
-                         {"policy", c.v->policy},
-                         {"label", c.v->label},
-                         {"mode", m.name},
-                         {"gap_us", m.gap.count()},
-                         {"size", size},
-                         {"complete", complete},
-                         {"errors", c.errors},
-                         {"runs", runs},
-                         {"p50_us", s.p50},
-                         {"p50_min_us", s.p50_min},
-                         {"p50_max_us", s.p50_max},
-                         {"p99_us", s.p99},
-                         {"min_us", s.min},
-                         {"max_us", s.max},
-                         {"ratio_to_udp", ratio}});
       }
+      nlohmann::json js{{"transport", c.v.name},
+                        {"family", c.v.family},
+                        {"policy", c.v.policy},
+                        {"label", c.v.label},
+                        {"mode", m.name},
+                        {"gap_us", m.gap.count()},
+                        {"size", size},
+                        {"complete", complete},
+                        {"errors", c.errors},
+                        {"runs", runs}};
+      if (oneway) {
+        js["msgs_per_s"] = s.msgs;
+        js["msgs_per_s_min"] = s.msgs_min;
+        js["msgs_per_s_max"] = s.msgs_max;
+        js["lost"] = s.lost;
+        js["stalls"] = s.stalls;
+        js["client_allocs_per_msg"] = s.client_allocs;
+        js["server_allocs_per_msg"] = s.server_allocs;
+        js["ratio_to_udp"] = r_udp;
+        js["ratio_to_dds"] = r_dds;
+      } else {
+        js["p50_us"] = s.p50;
+        js["p50_min_us"] = s.p50_min;
+        js["p50_max_us"] = s.p50_max;
+        js["p99_us"] = s.p99;
+        js["min_us"] = s.min;
+        js["max_us"] = s.max;
+        js[ratio_name] = r_main;
+      }
+      cases.push_back(std::move(js));
+    }
   }
-  for (auto& v : variants)
-    std::cout << "\n  " << v.name << ": " << v.label;
-  std::cout << "\n  herm and caf clients: one event-based actor, next request from the "
-               "reply's then-callback\n";
+  // Every requested mode measured something: a mode left without a case
+  // (--modes router --only udp) is an error, not a silent pass.
+  for (auto& m : modes)
+    if (!modes_arg.empty()
+        && std::none_of(results.begin(), results.end(),
+                        [&](const case_result& c) { return c.m == &m; })) {
+      std::cout << "\nmode " << m.name << ": no transport selected measures it\n";
+      ok = false;
+    }
+  std::map<std::pair<std::string, std::string>, std::vector<std::string>> labels;
+  for (auto& c : results) {
+    auto& ms = labels[{c.v.name, c.v.label}];
+    if (!has(ms, c.m->name))
+      ms.push_back(c.m->name);
+  }
+  std::cout << "\n";
+  for (auto& [key, ms] : labels) {
+    std::string joined;
+    for (auto& x : ms)
+      joined += (joined.empty() ? "" : ", ") + x;
+    std::cout << "  " << key.first << " (" << joined << "): " << key.second << "\n";
+  }
+  std::cout << "  allocs/msg: operator-new calls per measured message in the sender (c) and "
+               "the receiver (s); C libraries' malloc calls (Cyclone DDS, part of libzmq) "
+               "are not seen\n";
+  std::cout << "  herm and caf clients: one event-based actor, next request from the "
+               "reply's then-callback; oneway: as many sends as the window allows\n";
   std::cout << (ok ? "all cases complete" : "SOME CASES FAILED") << std::endl;
 
   if (!json_path.empty()) {
@@ -590,6 +923,10 @@ int main(int argc, char** argv) {
     nlohmann::json skipped_json = nlohmann::json::array();
     for (auto& [name, why] : skipped)
       skipped_json.push_back({{"transport", name}, {"reason", why}});
+    nlohmann::json modes_json = nlohmann::json::array();
+    for (auto& m : modes)
+      modes_json.push_back({{"name", m.name}, {"kind", m.kind}, {"gap_us", m.gap.count()},
+                            {"count", m.count}, {"warmup", m.warmup}});
     nlohmann::json doc{
       {"benchmark", "herm-bench-rtt"},
       {"command", command},
@@ -601,14 +938,19 @@ int main(int argc, char** argv) {
         {"loadavg_after", read_first_line("/proc/loadavg")}}},
       {"parameters",
        {{"sizes", sizes},
+        {"oneway_sizes", oneway_sizes},
+        {"policies", policies},
         {"repeat", repeat},
         {"hello_ms", ep.hello.count()},
         {"timeout_ms", timeout_ms},
-        {"modes",
-         {{{"name", modes[0].name}, {"gap_us", 0}, {"count", count}, {"warmup", warmup}},
-          {{"name", modes[1].name}, {"gap_us", modes[1].gap.count()},
-           {"count", gap_count}, {"warmup", gap_warmup}}}}}},
-      {"units", "microseconds"},
+        {"window", ep.window},
+        {"ack_every", ep.ack_every},
+        {"stall_ms", stall_ms},
+        {"allocs_note", "client_allocs_per_msg/server_allocs_per_msg count operator-new "
+                        "calls only: C libraries' malloc calls (Cyclone DDS, part of "
+                        "libzmq) are not seen"},
+        {"modes", modes_json}}},
+      {"units", "microseconds; oneway: messages per second"},
       {"skipped", skipped_json},
       {"cases", cases},
       {"ok", ok}};

@@ -8,21 +8,42 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace herm::bench {
 
+/// Splits "POLICY[:THREADS]" into the policy and the worker count (0: none
+/// given).
+inline std::pair<std::string, size_t> split_policy(const std::string& x) {
+  auto colon = x.find(':');
+  if (colon == std::string::npos)
+    return {x, 0};
+  return {x.substr(0, colon),
+          static_cast<size_t>(std::stoul(x.substr(colon + 1)))};
+}
+
 /// What one client or server process does.
 struct endpoint_params {
-  /// Transport family: udp, herm, caf, zmq, dds.
+  /// Transport family: udp, herm, caf, zmq, dds (caf-local: inprocess only).
   std::string transport;
-  /// CAF scheduler policy for herm and caf: "sharing" or "stealing".
+  /// What is measured: "rtt" (request round trips, back to back or with a
+  /// gap), "oneway" (one-way throughput with a credit window), "inprocess"
+  /// (round trips inside one process), "router" (round trips across a
+  /// router module; herm only).
+  std::string mode = "rtt";
+  /// CAF scheduler for herm and caf: "sharing" or "stealing", optionally
+  /// with a worker count after a colon ("sharing:1"; none: one per core).
   std::string policy = "sharing";
   /// udp, caf, zmq: the server's port (0: the server picks and prints it).
   /// herm: the server module's UDP port. dds: the DDS domain id.
   uint16_t port = 0;
   /// herm only: the client module's UDP port.
   uint16_t port2 = 0;
+  /// herm router mode only: the router module's UDP ports facing the client
+  /// module (port3) and the server module (port4).
+  uint16_t port3 = 0;
+  uint16_t port4 = 0;
   /// herm only: the routing hello interval of both modules.
   std::chrono::milliseconds hello{1000};
   /// Client: payload bytes per request (the reply has the same size).
@@ -34,20 +55,102 @@ struct endpoint_params {
   std::chrono::microseconds gap{0};
   /// Client: one round trip slower than this fails the run.
   std::chrono::milliseconds timeout{2000};
+  /// oneway: the receiver acknowledges every `ack_every` messages (and the
+  /// last one); the sender never has more than `window` unacknowledged. A
+  /// window that stays full for `stall` (a lost message or acknowledgement)
+  /// is counted as a stall and reopened.
+  uint32_t window = 128;
+  uint32_t ack_every = 16;
+  std::chrono::milliseconds stall{100};
+  /// udp oneway only: send in batches with sendmmsg instead of one send each.
+  bool batch = false;
   /// dds only: a tag that keeps this run's topics apart from others'.
   std::string tag = "0";
 };
 
-/// A client's outcome: `count` round-trip times in nanoseconds, or an error.
+/// A client's outcome: `count` round-trip times in nanoseconds (rtt,
+/// inprocess, router), or the oneway figures, or an error.
 struct client_result {
   std::vector<int64_t> rtt_ns;
   std::string error;
+  /// oneway: measured messages sent (after the warm-up), messages the
+  /// receiver got of them, its time from the first to the last of them, the
+  /// window stalls, and operator-new calls per measured message in the
+  /// client and in the server (-1: not counted).
+  uint64_t sent = 0;
+  uint64_t received = 0;
+  int64_t elapsed_ns = 0;
+  uint64_t stalls = 0;
+  double client_allocs = -1;
+  double server_allocs = -1;
 };
+
+// -- the oneway protocol -------------------------------------------------------------
+// Data messages carry their sequence number in their first four bytes
+// (fill_payload); warm-up messages come first, then `count` measured ones.
+// Control values (in the first four bytes of a control message where the
+// transport has no message types of its own):
+constexpr uint32_t oneway_done = 0xFFFFFFFFu;   // sender -> receiver: report
+constexpr uint32_t oneway_ack = 0xFFFFFFFEu;    // receiver -> sender: u32 acked
+constexpr uint32_t oneway_result = 0xFFFFFFFDu; // receiver -> sender: figures
+
+/// The receiver's side of the oneway protocol, transport-independent: feed
+/// it every data message's sequence number; it says when to acknowledge.
+struct oneway_counter {
+  uint32_t warmup = 0;
+  uint32_t total = 0; // warm-up + measured
+  uint32_t ack_every = 32;
+  uint64_t received = 0; // measured ones
+  uint64_t seen = 0;     // all
+  uint32_t next = 0;     // highest sequence number seen + 1
+  int64_t first_ns = 0, last_ns = 0;
+  uint64_t first_allocs = 0, last_allocs = 0;
+
+  /// Returns true when an acknowledgement of `next` is due.
+  bool on_message(uint32_t seq, int64_t now);
+  int64_t elapsed() const {
+    return received > 1 ? last_ns - first_ns : 0;
+  }
+  /// operator-new calls per measured message between the first and the
+  /// last (-1: fewer than two).
+  double allocs_per_message() const {
+    return received > 1 ? static_cast<double>(last_allocs - first_allocs)
+                            / static_cast<double>(received - 1)
+                        : -1;
+  }
+};
+
+/// Where a transport has no message types of its own: an acknowledgement
+/// and the receiver's figures, as they travel (same host, same layout).
+struct oneway_ack_msg {
+  uint32_t tag = oneway_ack;
+  uint32_t acked = 0;
+};
+
+struct oneway_result_msg {
+  uint32_t tag = oneway_result;
+  uint32_t pad = 0;
+  uint64_t received = 0;
+  int64_t elapsed_ns = 0;
+  double allocs = -1;
+};
+
+/// operator-new calls in this process so far (counting is on only in the
+/// oneway mode: `alloc_counting(true)`).
+uint64_t alloc_count();
+void alloc_counting(bool on);
 
 /// Serves until killed. Prints "ready PORT" (flushed) on stdout once clients
 /// may connect; returns non-zero after printing "error ..." when it cannot.
 using server_fn = int (*)(const endpoint_params&);
 using client_fn = client_result (*)(const endpoint_params&);
+
+/// herm router mode: a module with two udp devices (port3 toward the
+/// client's module, port4 toward the server's) that forwards between them.
+int herm_router(const endpoint_params& p);
+/// inprocess mode: one process, one module; transport "herm" requests
+/// through a proxy bound by name, "caf-local" the echo actor directly.
+client_result inprocess_client(const endpoint_params& p);
 
 int udp_server(const endpoint_params& p);
 client_result udp_client(const endpoint_params& p);
@@ -75,6 +178,55 @@ inline int64_t now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
            std::chrono::steady_clock::now().time_since_epoch())
     .count();
+}
+
+/// The oneway sender's loop for blocking transports. `send_one(seq)` sends
+/// data message `seq` (returns an error text or empty);
+/// `read_acks(block, acked)` raises `acked` from the acknowledgements that
+/// arrived, waiting up to `p.stall` for the first when `block`;
+/// `get_result(res)` asks the receiver for its figures (error text or empty).
+template <class Send, class ReadAcks, class GetResult>
+client_result run_oneway_sender(const endpoint_params& p, Send send_one,
+                                ReadAcks read_acks, GetResult get_result) {
+  client_result res;
+  uint32_t total = p.warmup + p.count, sent = 0, acked = 0;
+  uint64_t allocs_start = 0, allocs_end = 0;
+  while (sent < total) {
+    if (sent - acked >= p.window) {
+      auto before = acked;
+      read_acks(true, acked);
+      if (acked == before) {
+        ++res.stalls; // a message or an acknowledgement was lost
+        acked = sent;
+      }
+      continue;
+    }
+    if (sent == p.warmup)
+      allocs_start = alloc_count();
+    if (auto err = send_one(sent); !err.empty()) {
+      res.error = err;
+      return res;
+    }
+    ++sent;
+  }
+  allocs_end = alloc_count();
+  while (acked < total) {
+    auto before = acked;
+    read_acks(true, acked);
+    if (acked == before) {
+      ++res.stalls;
+      break;
+    }
+  }
+  if (auto err = get_result(res); !err.empty()) {
+    res.error = err;
+    return res;
+  }
+  res.sent = p.count;
+  if (p.count > 0)
+    res.client_allocs = static_cast<double>(allocs_end - allocs_start)
+                        / static_cast<double>(p.count);
+  return res;
 }
 
 } // namespace herm::bench

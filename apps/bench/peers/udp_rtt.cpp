@@ -1,5 +1,7 @@
 // Raw UDP ping-pong with blocking sockets: the floor every other transport
-// is compared with. One datagram each way, no framing.
+// is compared with. One datagram each way, no framing. oneway: a plain
+// `send` loop (or `sendmmsg` batches) on one blocking socket under the
+// credit window; the receiver acknowledges to the sender's address.
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -7,6 +9,7 @@
 #include <sys/time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <iostream>
@@ -44,6 +47,151 @@ std::string errno_text(const char* what) {
   return std::string{what} + ": " + std::strerror(errno);
 }
 
+using result_datagram = oneway_result_msg;
+using ack_datagram = oneway_ack_msg;
+
+/// oneway receiver: counts data datagrams, acknowledges to their sender,
+/// answers a done datagram with the figures.
+[[noreturn]] void udp_count(int fd, const endpoint_params& p) {
+  oneway_counter c;
+  c.warmup = p.warmup;
+  c.total = p.warmup + p.count;
+  c.ack_every = p.ack_every;
+  std::vector<uint8_t> buf(65536);
+  for (;;) {
+    sockaddr_in from{};
+    socklen_t from_len = sizeof(from);
+    auto n = ::recvfrom(fd, buf.data(), buf.size(), 0,
+                        reinterpret_cast<sockaddr*>(&from), &from_len);
+    if (n < 4)
+      continue;
+    auto seq = payload_seq(buf.data(), static_cast<size_t>(n));
+    if (seq == oneway_done) {
+      result_datagram r;
+      r.received = c.received;
+      r.elapsed_ns = c.elapsed();
+      r.allocs = c.allocs_per_message();
+      ::sendto(fd, &r, sizeof(r), 0, reinterpret_cast<sockaddr*>(&from), from_len);
+      continue;
+    }
+    if (c.on_message(seq, now_ns())) {
+      ack_datagram a;
+      a.acked = c.next;
+      ::sendto(fd, &a, sizeof(a), 0, reinterpret_cast<sockaddr*>(&from), from_len);
+    }
+  }
+}
+
+/// oneway sender (see transport.hpp): one send per message, or batches of
+/// up to 64 with sendmmsg.
+client_result udp_oneway_client(int fd, const endpoint_params& p) {
+  client_result res;
+  timeval tv{};
+  tv.tv_sec = p.stall.count() / 1000;
+  tv.tv_usec = (p.stall.count() % 1000) * 1000;
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+  uint32_t total = p.warmup + p.count, sent = 0, acked = 0;
+  uint64_t allocs_start = 0, allocs_end = 0;
+  uint8_t in[64];
+  // Reads acknowledgements: waits (up to the stall time) only if `block`.
+  auto read_acks = [&](bool block) {
+    for (;;) {
+      auto n = ::recv(fd, in, sizeof(in), block ? 0 : MSG_DONTWAIT);
+      if (n < 0)
+        return false;
+      block = false;
+      if (n == sizeof(ack_datagram) && payload_seq(in, 4) == oneway_ack) {
+        ack_datagram a;
+        std::memcpy(&a, in, sizeof(a));
+        if (a.acked > acked && a.acked <= sent)
+          acked = a.acked;
+      }
+    }
+  };
+  constexpr size_t max_batch = 64;
+  std::vector<std::vector<uint8_t>> bufs(p.batch ? max_batch : 1,
+                                         std::vector<uint8_t>(p.size));
+  std::vector<mmsghdr> msgs(max_batch);
+  std::vector<iovec> iovs(max_batch);
+  while (sent < total) {
+    if (sent - acked >= p.window) {
+      auto before = acked;
+      read_acks(true);
+      if (acked == before) {
+        ++res.stalls; // a datagram or an acknowledgement was lost
+        acked = sent;
+      }
+      continue;
+    }
+    if (sent == p.warmup)
+      allocs_start = alloc_count();
+    size_t room = std::min<size_t>(p.window - (sent - acked), total - sent);
+    if (!p.batch) {
+      fill_payload(bufs[0], sent);
+      if (::send(fd, bufs[0].data(), p.size, 0) != static_cast<ssize_t>(p.size)) {
+        res.error = errno_text("udp send");
+        return res;
+      }
+      ++sent;
+    } else {
+      // Never across the warm-up boundary, so the allocation count starts there.
+      size_t k = std::min(room, max_batch);
+      if (sent < p.warmup)
+        k = std::min<size_t>(k, p.warmup - sent);
+      for (size_t i = 0; i < k; ++i) {
+        fill_payload(bufs[i], sent + static_cast<uint32_t>(i));
+        iovs[i] = {bufs[i].data(), p.size};
+        msgs[i] = {};
+        msgs[i].msg_hdr.msg_iov = &iovs[i];
+        msgs[i].msg_hdr.msg_iovlen = 1;
+      }
+      auto n = ::sendmmsg(fd, msgs.data(), static_cast<unsigned>(k), 0);
+      if (n <= 0) {
+        res.error = errno_text("udp sendmmsg");
+        return res;
+      }
+      sent += static_cast<uint32_t>(n);
+    }
+    if (sent == total)
+      allocs_end = alloc_count();
+  }
+  // Everything acknowledged (or given up on after a stall), then the figures.
+  while (acked < total) {
+    auto before = acked;
+    read_acks(true);
+    if (acked == before) {
+      ++res.stalls;
+      break;
+    }
+  }
+  for (int tries = 0;; ++tries) {
+    if (tries == 20) {
+      res.error = "udp: no result from the receiver";
+      return res;
+    }
+    uint32_t done = oneway_done;
+    ::send(fd, &done, sizeof(done), 0);
+    uint8_t r_buf[64];
+    ssize_t n;
+    while ((n = ::recv(fd, r_buf, sizeof(r_buf), 0)) >= 0)
+      if (n == sizeof(result_datagram) && payload_seq(r_buf, 4) == oneway_result)
+        break;
+    if (n == sizeof(result_datagram)) {
+      result_datagram r;
+      std::memcpy(&r, r_buf, sizeof(r));
+      res.received = r.received;
+      res.elapsed_ns = r.elapsed_ns;
+      res.server_allocs = r.allocs;
+      break;
+    }
+  }
+  res.sent = p.count;
+  if (p.count > 0)
+    res.client_allocs = static_cast<double>(allocs_end - allocs_start)
+                        / static_cast<double>(p.count);
+  return res;
+}
+
 } // namespace
 
 int udp_server(const endpoint_params& p) {
@@ -56,6 +204,8 @@ int udp_server(const endpoint_params& p) {
     return 1;
   }
   std::cout << "ready " << ntohs(addr.sin_port) << std::endl;
+  if (p.mode == "oneway")
+    udp_count(fd, p);
   std::vector<uint8_t> buf(65536);
   for (;;) {
     sockaddr_in from{};
@@ -82,6 +232,8 @@ client_result udp_client(const endpoint_params& p) {
     res.error = errno_text("udp connect");
     return res;
   }
+  if (p.mode == "oneway")
+    return udp_oneway_client(fd, p);
   std::vector<uint8_t> out(p.size), in(p.size + 64);
   res.rtt_ns.reserve(p.count);
   for (uint32_t i = 0; i < p.warmup + p.count; ++i) {
