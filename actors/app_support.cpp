@@ -1,6 +1,8 @@
 #include "actors/app_support.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <deque>
 #include <functional>
 #include <map>
 #include <random>
@@ -35,6 +37,8 @@ struct binding {
   time_point next_search;
   bool searching = false;
   time_point last_watch;
+  /// Requests through this proxy travel in reliable mode.
+  bool reliable = false;
 };
 
 /// A request sent to a remote APO, waiting for its response.
@@ -44,13 +48,48 @@ struct outgoing {
   uint32_t binding = 0;
   module_id dst = no_module;
   time_point deadline;
+  // -- reliable mode: what to send again, and when --
+  bool reliable = false;
+  bool oneway = false;
+  /// The message (handed over unchanged if a rebinding proxy's new target
+  /// is local) and its marshalled form.
+  caf::message msg;
+  byte_buffer payload;
+  /// Copies sent so far (0: waiting for a reachable target).
+  uint32_t sends = 0;
+  time_point first_sent;
+  time_point next_send;
+  std::chrono::milliseconds rto{0};
+  /// The receiver said it is serving the request: only probe now and then.
+  bool acked = false;
+  /// Counted in reliable_waited already.
+  bool waited = false;
 };
+
+/// Round-trip estimate to one module (RFC 6298), in ms.
+struct rtt_estimate {
+  double srtt = 0;
+  double rttvar = 0;
+};
+
+/// What the receiving module remembers of one reliable request.
+struct cached_reply {
+  /// False while the APO works on it.
+  bool done = false;
+  bool oneway = false;
+  /// When done and not one-way: sent again for every copy that arrives.
+  asl_response response;
+};
+
+using request_key = std::pair<module_id, uint64_t>;
 
 /// A request a remote module made of one of our APOs.
 struct served {
   module_id origin = no_module;
   uint64_t origin_id = 0;
   time_point deadline;
+  /// The response goes into the duplicate-suppression cache too.
+  bool reliable = false;
 };
 
 /// A discovery in progress.
@@ -112,6 +151,17 @@ struct asl_state {
   std::set<module_id> reachable;
   std::map<module_id, time_point> unreachable_since;
   caf::strong_actor_ptr sink;
+  // -- reliable mode --
+  /// Receiver: (sending module, request id) -> what was done, with the
+  /// entries in arrival order and when each expires (ttl is constant, so
+  /// the front expires first). Both hold the same keys.
+  std::map<request_key, cached_reply> cache;
+  std::deque<std::pair<request_key, time_point>> cache_order;
+  /// Sender: reliable requests answered lately (late copies are counted as
+  /// such), bounded like the cache.
+  std::set<uint64_t> completed;
+  std::deque<uint64_t> completed_order;
+  std::map<module_id, rtt_estimate> rtt;
   uint32_t ticks = 0;
   app_support_stats stats;
   byte_buffer buf;
@@ -186,11 +236,12 @@ bool reachable(asl_impl self, module_id m) {
 /// Fails every request waiting on binding `id` (or, with id 0, on module
 /// `dst`).
 void fail_pending(asl_impl self, uint32_t id, module_id dst,
-                  const caf::error& err) {
+                  const caf::error& err, bool keep_reliable = false) {
   auto& st = self->state;
   for (auto i = st.pending.begin(); i != st.pending.end();) {
-    if ((id != 0 && i->second.binding == id)
-        || (id == 0 && i->second.dst == dst)) {
+    if (((id != 0 && i->second.binding == id)
+         || (id == 0 && i->second.dst == dst))
+        && !(keep_reliable && i->second.reliable)) {
       post(self, i->second.sender, nullptr, i->second.mid.response_id(),
            caf::make_message(err));
       i = st.pending.erase(i);
@@ -210,7 +261,9 @@ void lose_target(asl_impl self, uint32_t id, const caf::error& reason,
   if (i == st.bindings.end())
     return;
   auto& b = i->second;
-  fail_pending(self, id, no_module, request_error);
+  // Reliable requests of a rebinding proxy wait for its next target (or
+  // their deadline).
+  fail_pending(self, id, no_module, request_error, b.rebind);
   if (b.rebind) {
     b.bound = false;
     b.next_search = self->clock().now();
@@ -246,17 +299,19 @@ void bind_to(asl_impl self, binding& b, const apo_ref& ref) {
 
 /// A new proxy bound to `ref` (or, unbound, looking for `req`).
 caf::actor make_binding(asl_impl self, const apo_ref* ref,
-                        const bind_request* req) {
+                        const bind_request* req, bool reliable = false) {
   auto& st = self->state;
   auto id = st.next_binding++;
   auto proxy = detail::make_apo_proxy(self->system(),
                                       caf::actor_cast<caf::actor>(self), id);
   auto& b = st.bindings[id];
   b.proxy = caf::actor_cast<caf::weak_actor_ptr>(proxy);
+  b.reliable = reliable;
   if (req != nullptr) {
     b.rebind = req->rebind;
     b.by = req->by;
     b.pattern = req->pattern;
+    b.reliable = req->reliable;
   }
   if (ref != nullptr)
     bind_to(self, b, *ref);
@@ -338,7 +393,171 @@ void on_query(asl_impl self, module_id src, const asl_query& q) {
     transmit(self, src, a);
 }
 
+// -- reliable mode: the sender ----------------------------------------------------
+
+std::chrono::milliseconds base_rto(asl_impl self, module_id dst) {
+  auto& cfg = self->state.cfg;
+  auto i = self->state.rtt.find(dst);
+  if (i == self->state.rtt.end())
+    return cfg.retransmit_initial;
+  auto ms = std::chrono::milliseconds(
+    static_cast<int64_t>(i->second.srtt + 4 * i->second.rttvar + 0.5));
+  return std::clamp(ms, cfg.retransmit_min, cfg.retransmit_max);
+}
+
+/// A round trip to `dst` of a request answered on its first copy (Karn).
+void sample_rtt(asl_impl self, module_id dst, time_point sent) {
+  auto r = std::chrono::duration<double, std::milli>(self->clock().now() - sent)
+             .count();
+  auto [i, fresh] = self->state.rtt.try_emplace(dst);
+  auto& e = i->second;
+  if (fresh) {
+    e.srtt = r;
+    e.rttvar = r / 2;
+  } else {
+    e.rttvar = 0.75 * e.rttvar + 0.25 * std::abs(e.srtt - r);
+    e.srtt = 0.875 * e.srtt + 0.125 * r;
+  }
+}
+
+/// Reliable request `rid` got its response or ack: late copies of either
+/// are recognized for a while.
+void note_completed(asl_impl self, uint64_t rid) {
+  auto& st = self->state;
+  if (!st.completed.insert(rid).second)
+    return;
+  st.completed_order.push_back(rid);
+  while (st.completed_order.size() > st.cfg.reliable_cache) {
+    st.completed.erase(st.completed_order.front());
+    st.completed_order.pop_front();
+  }
+}
+
+/// Sends reliable request `rid` (again) if its binding has a reachable
+/// target, and sets when to look at it next. Returns true when it was
+/// handed to a local APO instead (a rebinding proxy's new target is here):
+/// the caller forgets it.
+bool send_reliable(asl_impl self, uint64_t rid, outgoing& out, time_point now) {
+  auto& st = self->state;
+  auto wait = [&] {
+    if (!out.waited) {
+      out.waited = true;
+      ++st.stats.reliable_waited;
+    }
+    out.next_send = now + st.cfg.tick;
+    return false;
+  };
+  auto b = st.bindings.find(out.binding);
+  if (b == st.bindings.end() || !b->second.bound)
+    return wait(); // parked: waits for a target
+  auto& target = b->second.target;
+  if (target.module == st.self_id) {
+    auto a = st.apos.find(target.apo);
+    if (a == st.apos.end()) {
+      out.next_send = now + st.cfg.tick;
+      return false;
+    }
+    post(self, caf::actor_cast<caf::strong_actor_ptr>(a->second),
+         std::move(out.sender), out.mid, std::move(out.msg));
+    return true;
+  }
+  if (!reachable(self, target.module))
+    return wait();
+  if (out.sends >= st.cfg.max_transmissions) {
+    out.next_send = now + st.cfg.tick;
+    return false;
+  }
+  if (out.sends == 0 || out.dst != target.module) {
+    out.sends = 0;
+    out.acked = false;
+    out.first_sent = now;
+    out.rto = base_rto(self, target.module);
+  } else {
+    ++st.stats.retransmissions;
+    out.rto = std::min(out.acked ? st.cfg.retransmit_max : out.rto * 2,
+                       st.cfg.retransmit_max);
+  }
+  ++out.sends;
+  out.dst = target.module;
+  transmit(self, out.dst,
+           asl_reliable_request{rid, target.apo, out.oneway, out.payload});
+  out.next_send = now + out.rto;
+  return false;
+}
+
+/// Sends every reliable request whose time has come (all of them towards
+/// `only`, when given: it just became reachable or was bound).
+void send_due(asl_impl self, uint32_t only_binding = 0,
+              module_id only_module = no_module) {
+  auto& st = self->state;
+  auto now = self->clock().now();
+  for (auto i = st.pending.begin(); i != st.pending.end();) {
+    auto& out = i->second;
+    bool forced = false;
+    if (out.reliable && (only_binding != 0 || only_module != no_module)) {
+      auto b = st.bindings.find(out.binding);
+      forced = (only_binding != 0 && out.binding == only_binding)
+               || (only_module != no_module && b != st.bindings.end()
+                   && b->second.bound && b->second.target.module == only_module
+                   && !out.acked);
+    }
+    if (out.reliable && (forced || out.next_send <= now)
+        && send_reliable(self, i->first, out, now))
+      i = st.pending.erase(i);
+    else
+      ++i;
+  }
+}
+
 // -- requests ------------------------------------------------------------------------
+
+/// A request or one-way message through a reliable binding (the target is
+/// remote, or the proxy is still looking for one).
+void forward_reliable(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
+                      caf::message_id mid, caf::message& msg) {
+  auto& st = self->state;
+  auto payload = marshal(self->system(), msg);
+  if (!payload) {
+    ++st.stats.tx_refused;
+    refuse(self, sender, mid, std::move(payload.error()));
+    return;
+  }
+  if (payload->size() > st.cfg.max_message) {
+    ++st.stats.tx_refused;
+    refuse(self, sender, mid,
+           make_error(ec::packet_too_large,
+                      "message of " + std::to_string(payload->size())
+                        + " bytes marshalled; the limit is "
+                        + std::to_string(st.cfg.max_message)));
+    return;
+  }
+  if (st.pending.size() >= st.cfg.max_pending) {
+    ++st.stats.tx_refused;
+    refuse(self, sender, mid,
+           make_error(ec::queue_full, std::to_string(st.pending.size())
+                                        + " remote requests outstanding"));
+    return;
+  }
+  auto now = self->clock().now();
+  auto rid = st.next_request++;
+  outgoing out;
+  out.sender = std::move(sender);
+  out.mid = mid;
+  out.binding = id;
+  out.deadline = now + st.cfg.request_timeout;
+  out.reliable = true;
+  out.oneway = !mid.is_request();
+  out.msg = std::move(msg);
+  out.payload = std::move(*payload);
+  if (out.oneway)
+    ++st.stats.oneway_sent;
+  else
+    ++st.stats.requests_sent;
+  ++st.stats.reliable_sent;
+  auto i = st.pending.emplace(rid, std::move(out)).first;
+  if (send_reliable(self, rid, i->second, now))
+    st.pending.erase(i);
+}
 
 void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
                 caf::message_id mid, caf::message& msg) {
@@ -349,6 +568,11 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
     return;
   }
   auto& b = i->second;
+  if (b.reliable
+      && (b.bound ? b.target.module != st.self_id : b.rebind)) {
+    forward_reliable(self, id, sender, mid, msg);
+    return;
+  }
   if (!b.bound) {
     refuse(self, sender, mid,
            make_error(ec::apo_gone, "no APO named '" + b.pattern
@@ -402,23 +626,113 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
     return;
   }
   auto rid = st.next_request++;
-  st.pending.emplace(rid, outgoing{std::move(sender), mid, id, b.target.module,
-                                   self->clock().now()
-                                     + st.cfg.request_timeout});
+  outgoing out;
+  out.sender = std::move(sender);
+  out.mid = mid;
+  out.binding = id;
+  out.dst = b.target.module;
+  out.deadline = self->clock().now() + st.cfg.request_timeout;
+  st.pending.emplace(rid, std::move(out));
   ++st.stats.requests_sent;
   transmit(self, b.target.module,
            asl_request{rid, b.target.apo, std::move(*payload)});
+}
+
+asl_response error_response(uint64_t rid, const caf::error& err) {
+  asl_response r;
+  r.request_id = rid;
+  r.ok = false;
+  r.error = to_wire(err);
+  return r;
 }
 
 void respond_error(asl_impl self, module_id dst, uint64_t rid,
                    const caf::error& err) {
   if (rid == 0)
     return;
-  asl_response r;
-  r.request_id = rid;
-  r.ok = false;
-  r.error = to_wire(err);
-  transmit(self, dst, r);
+  transmit(self, dst, error_response(rid, err));
+}
+
+// -- reliable mode: the receiver --------------------------------------------------
+
+/// Remembers reliable request `key`; the oldest entry goes when full.
+cached_reply& remember(asl_impl self, const request_key& key, bool done,
+                       bool oneway) {
+  auto& st = self->state;
+  while (!st.cache_order.empty() && st.cache.size() >= st.cfg.reliable_cache) {
+    st.cache.erase(st.cache_order.front().first);
+    st.cache_order.pop_front();
+  }
+  st.cache_order.emplace_back(key, self->clock().now()
+                                     + st.cfg.reliable_cache_ttl);
+  auto& c = st.cache[key];
+  c.done = done;
+  c.oneway = oneway;
+  return c;
+}
+
+void send_ack(asl_impl self, module_id dst, uint64_t rid) {
+  ++self->state.stats.acks_sent;
+  transmit(self, dst, asl_ack{rid});
+}
+
+void on_reliable_request(asl_impl self, module_id src,
+                         asl_reliable_request& req) {
+  auto& st = self->state;
+  request_key key{src, req.request_id};
+  if (auto c = st.cache.find(key); c != st.cache.end()) {
+    // A copy of one that arrived before: never delivered again.
+    ++st.stats.duplicates_suppressed;
+    if (c->second.done && !c->second.oneway)
+      transmit(self, src, c->second.response);
+    else
+      send_ack(self, src, req.request_id);
+    return;
+  }
+  auto a = st.apos.find(req.apo);
+  if (a == st.apos.end()) {
+    ++st.stats.rx_unknown_apo;
+    respond_error(self, src, req.request_id,
+                  make_error(ec::apo_gone, "no APO " + std::to_string(req.apo)
+                                             + " on module "
+                                             + to_hex(st.self_id)));
+    return;
+  }
+  auto msg = unmarshal(self->system(), req.payload.data(), req.payload.size(),
+                       st.cfg.limits);
+  if (!msg) {
+    if (is(msg.error(), ec::unknown_type))
+      ++st.stats.rx_unknown_type;
+    else
+      ++st.stats.rx_malformed;
+    respond_error(self, src, req.request_id,
+                  make_error(static_cast<ec>(msg.error().code()),
+                             "module " + to_hex(st.self_id) + ": "
+                               + context_of(msg.error())));
+    return;
+  }
+  auto dst = caf::actor_cast<caf::strong_actor_ptr>(a->second);
+  if (req.oneway) {
+    remember(self, key, true, true);
+    ++st.stats.oneway_delivered;
+    post(self, dst, nullptr, caf::make_message_id(), std::move(*msg));
+    send_ack(self, src, req.request_id);
+    return;
+  }
+  if (st.serving.size() >= st.cfg.max_pending) {
+    // Not remembered: a later copy may find room.
+    respond_error(self, src, req.request_id,
+                  make_error(ec::queue_full, "module " + to_hex(st.self_id)
+                                               + " is serving too many requests"));
+    return;
+  }
+  remember(self, key, false, false);
+  auto local = st.next_served++;
+  st.serving.emplace(local, served{src, req.request_id,
+                                   self->clock().now() + st.cfg.request_timeout,
+                                   true});
+  ++st.stats.requests_served;
+  post(self, dst, st.sink, caf::make_message_id(local), std::move(*msg));
 }
 
 void on_request(asl_impl self, module_id src, asl_request& req) {
@@ -472,31 +786,60 @@ void on_reply(asl_impl self, uint64_t local, caf::message& msg) {
     return; // timed out meanwhile
   auto s = i->second;
   st.serving.erase(i);
-  if (msg.match_elements<caf::error>()) {
-    respond_error(self, s.origin, s.origin_id, msg.get_as<caf::error>(0));
-    return;
-  }
-  auto payload = marshal(self->system(), msg);
-  if (!payload) {
-    respond_error(self, s.origin, s.origin_id,
-                  make_error(ec::invalid_parameter,
-                             "the response cannot be marshalled: "
-                               + context_of(payload.error())));
-    return;
-  }
   asl_response r;
-  r.request_id = s.origin_id;
-  r.ok = true;
-  r.payload = std::move(*payload);
+  if (msg.match_elements<caf::error>()) {
+    r = error_response(s.origin_id, msg.get_as<caf::error>(0));
+  } else if (auto payload = marshal(self->system(), msg); !payload) {
+    r = error_response(s.origin_id,
+                       make_error(ec::invalid_parameter,
+                                  "the response cannot be marshalled: "
+                                    + context_of(payload.error())));
+  } else {
+    r.request_id = s.origin_id;
+    r.ok = true;
+    r.payload = std::move(*payload);
+  }
+  if (s.reliable)
+    if (auto c = st.cache.find(request_key{s.origin, s.origin_id});
+        c != st.cache.end()) {
+      c->second.done = true;
+      c->second.response = r;
+    }
   transmit(self, s.origin, r);
 }
 
 void on_response(asl_impl self, module_id src, asl_response& r) {
   auto& st = self->state;
   auto i = st.pending.find(r.request_id);
-  if (i == st.pending.end() || i->second.dst != src) {
-    ++st.stats.rx_unexpected_response;
+  if (i == st.pending.end() || i->second.dst != src
+      || (i->second.reliable && i->second.sends == 0)) {
+    if (st.completed.count(r.request_id) != 0)
+      ++st.stats.late_duplicates;
+    else
+      ++st.stats.rx_unexpected_response;
     return;
+  }
+  if (i->second.reliable) {
+    auto& out = i->second;
+    if (out.sends == 1)
+      sample_rtt(self, src, out.first_sent);
+    if (!r.ok && !out.oneway) {
+      // The APO is not there (any more): a rebinding proxy's request waits
+      // for the next target instead of failing.
+      auto err = from_wire(r.error);
+      auto b = st.bindings.find(out.binding);
+      if (is(err, ec::apo_gone) && b != st.bindings.end() && b->second.rebind) {
+        out.sends = 0;
+        lose_target(self, out.binding, err, err);
+        return;
+      }
+    }
+    note_completed(self, r.request_id);
+    if (out.oneway) {
+      // An error for a one-way message: nobody to tell.
+      st.pending.erase(i);
+      return;
+    }
   }
   auto out = std::move(i->second);
   st.pending.erase(i);
@@ -523,6 +866,31 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
     return;
   }
   post(self, out.sender, from, out.mid.response_id(), std::move(*msg));
+}
+
+void on_ack(asl_impl self, module_id src, const asl_ack& a) {
+  auto& st = self->state;
+  auto i = st.pending.find(a.request_id);
+  if (i == st.pending.end() || !i->second.reliable || i->second.dst != src
+      || i->second.sends == 0) {
+    if (st.completed.count(a.request_id) != 0)
+      ++st.stats.late_duplicates;
+    else
+      ++st.stats.rx_unexpected_response;
+    return;
+  }
+  ++st.stats.acks_received;
+  auto& out = i->second;
+  if (out.oneway) {
+    if (out.sends == 1)
+      sample_rtt(self, src, out.first_sent);
+    note_completed(self, a.request_id);
+    st.pending.erase(i);
+    return;
+  }
+  // Being served: probe at the slowest pace until the response comes.
+  out.acked = true;
+  out.next_send = self->clock().now() + st.cfg.retransmit_max;
 }
 
 // -- watching ------------------------------------------------------------------------
@@ -711,6 +1079,10 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
         on_request(self, src, x);
       } else if constexpr (std::is_same_v<T, asl_response>) {
         on_response(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_reliable_request>) {
+        on_reliable_request(self, src, x);
+      } else if constexpr (std::is_same_v<T, asl_ack>) {
+        on_ack(self, src, x);
       } else if constexpr (std::is_same_v<T, asl_watch>) {
         if (!st.table->watch(x.apo, src))
           transmit(self, src,
@@ -747,9 +1119,12 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
 void module_lost(asl_impl self, module_id m) {
   auto& st = self->state;
   auto err = make_error(ec::no_route, "module " + to_hex(m) + " unreachable");
+  // Reliable bindings ride it out: their requests wait for the module or
+  // their deadline.
   for (auto id : bindings_to(self, m, 0))
-    lose_target(self, id, err, err);
-  fail_pending(self, 0, m, err);
+    if (!st.bindings[id].reliable)
+      lose_target(self, id, err, err);
+  fail_pending(self, 0, m, err, true);
   st.table->drop_watcher(m);
   st.table->forget_module(m);
   for (auto& kv : st.topics) {
@@ -766,8 +1141,11 @@ void rebind_found(asl_impl self, uint32_t id, std::vector<apo_ref>& found) {
   auto& b = i->second;
   b.searching = false;
   b.next_search = self->clock().now() + st.cfg.rebind_interval;
-  if (!found.empty() && !b.bound)
+  if (!found.empty() && !b.bound) {
     bind_to(self, b, found.front());
+    if (b.reliable)
+      send_due(self, id);
+  }
 }
 
 void rebind_search(asl_impl self, uint32_t id) {
@@ -799,15 +1177,25 @@ void tick(asl_impl self) {
     }
   }
   // Deadlines.
+  auto within = " within " + std::to_string(st.cfg.request_timeout.count())
+                + " ms";
   for (auto i = st.pending.begin(); i != st.pending.end();) {
     if (i->second.deadline <= now) {
       ++st.stats.request_timeouts;
-      post(self, i->second.sender, nullptr, i->second.mid.response_id(),
-           caf::make_message(make_error(
-             ec::timeout, "no response from module " + to_hex(i->second.dst)
-                            + " within "
-                            + std::to_string(st.cfg.request_timeout.count())
-                            + " ms")));
+      auto& out = i->second;
+      auto err = make_error(ec::timeout, "no response from module "
+                                           + to_hex(out.dst) + within);
+      if (out.reliable) {
+        auto b = st.bindings.find(out.binding);
+        if (b == st.bindings.end() || !b->second.bound)
+          err = make_error(ec::apo_gone, "no APO to send it to" + within);
+        else if (!reachable(self, b->second.target.module))
+          err = make_error(ec::no_route, "module "
+                                           + to_hex(b->second.target.module)
+                                           + " stayed unreachable" + within);
+      }
+      post(self, out.sender, nullptr, out.mid.response_id(),
+           caf::make_message(std::move(err)));
       i = st.pending.erase(i);
     } else {
       ++i;
@@ -815,6 +1203,12 @@ void tick(asl_impl self) {
   }
   for (auto i = st.serving.begin(); i != st.serving.end();)
     i = i->second.deadline <= now ? st.serving.erase(i) : std::next(i);
+  // Reliable mode: copies due, expired cache entries.
+  send_due(self);
+  while (!st.cache_order.empty() && st.cache_order.front().second <= now) {
+    st.cache.erase(st.cache_order.front().first);
+    st.cache_order.pop_front();
+  }
   // Bindings: renew watches, look for new targets.
   std::vector<uint32_t> search;
   for (auto& [id, b] : st.bindings) {
@@ -952,6 +1346,18 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
         return make_error(ec::no_route, "no route to module " + to_hex(ref.module));
       return make_binding(self, &ref, nullptr);
     },
+    [self](atom::bind, apo_ref& ref, bool reliable) -> caf::result<caf::actor> {
+      auto& st = self->state;
+      if (ref.module == st.self_id) {
+        auto i = st.apos.find(ref.apo);
+        if (i == st.apos.end())
+          return make_error(ec::apo_gone, describe(ref));
+        return i->second;
+      }
+      if (!reachable(self, ref.module))
+        return make_error(ec::no_route, "no route to module " + to_hex(ref.module));
+      return make_binding(self, &ref, nullptr, reliable);
+    },
     [self](atom::bind, bind_request& req) -> caf::result<caf::actor> {
       if (req.by != query_by::any)
         if (auto err = check_label("a pattern", req.pattern))
@@ -1015,6 +1421,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       result.known_remote_apos = static_cast<uint32_t>(st.table->remotes().size());
       result.live_bindings = static_cast<uint32_t>(st.bindings.size());
       result.pending_requests = static_cast<uint32_t>(st.pending.size());
+      result.cached_responses = static_cast<uint32_t>(st.cache.size());
       return result;
     },
     [self](packet_delivered& pkt) { on_packet(self, pkt); },
@@ -1023,6 +1430,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       if (r.reachable) {
         st.reachable.insert(r.id);
         st.unreachable_since.erase(r.id);
+        // Reliable requests waiting for this module go now.
+        send_due(self, 0, r.id);
       } else if (st.reachable.erase(r.id) > 0) {
         st.unreachable_since.emplace(r.id, self->clock().now());
       }

@@ -76,17 +76,29 @@ typename Inspector::result_type inspect(Inspector& f, apo_query& x) {
 /// `app_support_config::rebind_interval`), then go to it. Without `rebind`
 /// the proxy ends with its target (monitors get a down message). Fails with
 /// ec::not_found when nothing answered within `timeout_ms`.
+///
+/// With `reliable`, requests and one-way messages through the proxy travel
+/// in reliable mode (docs/reliability.md, "Reliable requests"): the
+/// receiving module acknowledges them end to end, this module retransmits
+/// them with backoff until it hears back, and the receiving module delivers
+/// each one to the APO exactly once (a retransmitted request is answered
+/// from a cache of recent responses). A reliable binding rides out
+/// unreachability: its requests wait and are retransmitted when the module
+/// is back, and fail only at their deadline (`request_timeout`) with
+/// ec::no_route (the module stayed unreachable), ec::apo_gone (nothing bound
+/// to a rebinding proxy) or ec::timeout (reachable, but no response).
 struct bind_request {
   query_by by = query_by::name;
   std::string pattern;
   uint32_t timeout_ms = 500;
   bool rebind = false;
+  bool reliable = false;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, bind_request& x) {
   return f(caf::meta::type_name("bind_request"), x.by, x.pattern,
-           x.timeout_ms, x.rebind);
+           x.timeout_ms, x.rebind, x.reliable);
 }
 
 /// One row of the application table, for hermctl and tests.
@@ -135,6 +147,27 @@ struct app_support_stats {
   uint64_t rx_unexpected_response = 0;
   uint64_t tx_refused = 0;
   uint64_t dropped_no_route = 0;
+  // -- reliable mode ----------------------------------------------------------
+  /// Requests and one-way messages sent in reliable mode (first copies).
+  uint64_t reliable_sent = 0;
+  /// Copies sent again because no response or ack came in time.
+  uint64_t retransmissions = 0;
+  /// Reliable requests that arrived again and were not delivered again
+  /// (answered from the cache or acknowledged instead).
+  uint64_t duplicates_suppressed = 0;
+  /// Acks sent (one-way delivered, or a request still being served) and
+  /// received.
+  uint64_t acks_sent = 0;
+  uint64_t acks_received = 0;
+  /// Responses and acks for reliable requests nobody waits for any more
+  /// (a late copy after the first one arrived): dropped.
+  uint64_t late_duplicates = 0;
+  /// Reliable requests that had to wait for a route to their module (or
+  /// for a rebinding proxy's next target) before a copy could go out.
+  uint64_t reliable_waited = 0;
+  /// Entries now in the duplicate-suppression cache (at most
+  /// app_support_config::reliable_cache).
+  uint32_t cached_responses = 0;
 };
 
 template <class Inspector>
@@ -148,7 +181,10 @@ typename Inspector::result_type inspect(Inspector& f, app_support_stats& x) {
            x.publications_sent, x.publications_received,
            x.publications_delivered, x.publications_lost, x.rx_malformed,
            x.rx_unknown_apo, x.rx_unknown_type, x.rx_unexpected_response,
-           x.tx_refused, x.dropped_no_route);
+           x.tx_refused, x.dropped_no_route, x.reliable_sent,
+           x.retransmissions, x.duplicates_suppressed, x.acks_sent,
+           x.acks_received, x.late_duplicates, x.reliable_waited,
+           x.cached_responses);
 }
 
 using app_support_actor = caf::typed_actor<
@@ -166,6 +202,8 @@ using app_support_actor = caf::typed_actor<
   /// A proxy for the APO `ref` names (the local actor itself if it is ours).
   /// Errors: ec::apo_gone (not registered there), ec::no_route.
   caf::replies_to<atom::bind, apo_ref>::with<caf::actor>,
+  /// The same, `true`: in reliable mode (see bind_request::reliable).
+  caf::replies_to<atom::bind, apo_ref, bool>::with<caf::actor>,
   caf::replies_to<atom::bind, bind_request>::with<caf::actor>,
   // -- topics -------------------------------------------------------------------
   /// Publishes one value of a topic to every subscriber, local and remote.
@@ -215,6 +253,25 @@ struct app_support_config {
   size_t max_pending = 4096;
   /// Bounds on what arrives.
   unmarshal_limits limits;
+  // -- reliable mode ------------------------------------------------------------
+  /// First retransmission timeout to a module whose round trip has not been
+  /// measured yet; then RTO = SRTT + 4 RTTVAR (RFC 6298, samples only from
+  /// requests answered on their first copy), within [min, max]. Each further
+  /// retransmission of one request doubles its timeout, up to the max.
+  /// Retransmissions happen on the housekeeping tick, so `tick` is their
+  /// granularity.
+  std::chrono::milliseconds retransmit_initial{300};
+  std::chrono::milliseconds retransmit_min{50};
+  std::chrono::milliseconds retransmit_max{2000};
+  /// Most copies of one reliable request (the first included); after that
+  /// it waits for its deadline.
+  uint32_t max_transmissions = 64;
+  /// Duplicate suppression at the receiver: the most (sending module,
+  /// request id) entries remembered with their response, and for how long
+  /// (at least the senders' request_timeout, or a late copy could run
+  /// twice). The oldest entry goes first when full.
+  size_t reliable_cache = 2048;
+  std::chrono::milliseconds reliable_cache_ttl{15000};
 };
 
 /// Spawns the module's application support actor on top of its routing

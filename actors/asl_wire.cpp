@@ -33,7 +33,9 @@ static_assert(kind_is<asl_kind::subscribe, asl_subscribe>);
 static_assert(kind_is<asl_kind::unsubscribe, asl_unsubscribe>);
 static_assert(kind_is<asl_kind::publish, asl_publish>);
 static_assert(kind_is<asl_kind::advertise, asl_advertise>);
-static_assert(std::variant_size_v<asl_message> == 12);
+static_assert(kind_is<asl_kind::reliable_request, asl_reliable_request>);
+static_assert(kind_is<asl_kind::ack, asl_ack>);
+static_assert(std::variant_size_v<asl_message> == 14);
 
 /// Version and kind.
 constexpr size_t head_size = 2;
@@ -41,7 +43,7 @@ constexpr size_t head_size = 2;
 /// Smallest answer entry: apo and two empty strings.
 constexpr size_t min_entry_size = 4 + 1 + 1;
 
-constexpr uint8_t max_kind = static_cast<uint8_t>(asl_kind::advertise);
+constexpr uint8_t max_kind = static_cast<uint8_t>(asl_kind::ack);
 constexpr uint8_t max_query_by = static_cast<uint8_t>(query_by::any);
 
 const char* name_of(asl_kind k) {
@@ -70,6 +72,10 @@ const char* name_of(asl_kind k) {
       return "publish";
     case asl_kind::advertise:
       return "advertise";
+    case asl_kind::reliable_request:
+      return "reliable request";
+    case asl_kind::ack:
+      return "ack";
   }
   return "?";
 }
@@ -222,6 +228,17 @@ void put(writer& w, const asl_publish& x) {
 
 void put(writer& w, const asl_advertise& x) {
   w.str(x.topic);
+}
+
+void put(writer& w, const asl_reliable_request& x) {
+  w.u64(x.request_id);
+  w.u32(x.apo);
+  w.u8(x.oneway ? 1 : 0);
+  w.rest(x.payload);
+}
+
+void put(writer& w, const asl_ack& x) {
+  w.u64(x.request_id);
 }
 
 // -- reading ---------------------------------------------------------------------
@@ -434,6 +451,27 @@ caf::error get(reader& r, asl_advertise& x) {
   return r.str("topic", x.topic);
 }
 
+caf::error get(reader& r, asl_reliable_request& x) {
+  if (auto err = r.u64("request_id", x.request_id))
+    return err;
+  if (x.request_id == 0)
+    return r.fail("request_id 0 (reliable requests are numbered)");
+  if (auto err = r.u32("apo", x.apo))
+    return err;
+  if (auto err = r.boolean("oneway", x.oneway))
+    return err;
+  r.rest(x.payload);
+  return caf::none;
+}
+
+caf::error get(reader& r, asl_ack& x) {
+  if (auto err = r.u64("request_id", x.request_id))
+    return err;
+  if (x.request_id == 0)
+    return r.fail("request_id 0 (reliable requests are numbered)");
+  return caf::none;
+}
+
 template <class T>
 caf::expected<asl_message> decode_as(reader& r) {
   T x;
@@ -500,6 +538,10 @@ caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size) {
       return decode_as<asl_publish>(r);
     case asl_kind::advertise:
       return decode_as<asl_advertise>(r);
+    case asl_kind::reliable_request:
+      return decode_as<asl_reliable_request>(r);
+    case asl_kind::ack:
+      return decode_as<asl_ack>(r);
   }
   return bad("asl", "unknown kind " + num(data[1])); // not reached
 }
@@ -564,6 +606,15 @@ bool operator==(const asl_publish& a, const asl_publish& b) {
 
 bool operator==(const asl_advertise& a, const asl_advertise& b) {
   return a.topic == b.topic;
+}
+
+bool operator==(const asl_reliable_request& a, const asl_reliable_request& b) {
+  return a.request_id == b.request_id && a.apo == b.apo
+         && a.oneway == b.oneway && a.payload == b.payload;
+}
+
+bool operator==(const asl_ack& a, const asl_ack& b) {
+  return a.request_id == b.request_id;
 }
 
 } // namespace herm

@@ -48,6 +48,8 @@ enum class asl_kind : uint8_t {
   unsubscribe = 10,
   publish = 11,
   advertise = 12,
+  reliable_request = 13,
+  ack = 14,
 };
 
 /// What a discovery query matches.
@@ -147,10 +149,29 @@ struct asl_advertise {
   std::string topic;
 };
 
+/// A request in reliable mode (docs/protocol.md, "Reliable request"): the
+/// sender retransmits it until it hears back, the receiver delivers it to
+/// the APO once per (sending module, request_id) and answers a copy from a
+/// cache of recent responses. `request_id` is never 0; `oneway` means no
+/// response is expected, only an ack.
+struct asl_reliable_request {
+  uint64_t request_id = 0;
+  uint32_t apo = 0;
+  bool oneway = false;
+  byte_buffer payload;
+};
+
+/// "Reliable request `request_id` arrived": ends a one-way exchange; for a
+/// request still being served it tells the sender to keep waiting.
+struct asl_ack {
+  uint64_t request_id = 0;
+};
+
 using asl_message
   = std::variant<asl_query, asl_answer, asl_request, asl_response, asl_watch,
                  asl_unwatch, asl_down, asl_withdraw, asl_subscribe,
-                 asl_unsubscribe, asl_publish, asl_advertise>;
+                 asl_unsubscribe, asl_publish, asl_advertise,
+                 asl_reliable_request, asl_ack>;
 
 /// Appends the encoding of `x` to `out`. Strings longer than 255 bytes and
 /// answers with more than max_answer_entries entries are the caller's error
@@ -163,8 +184,8 @@ void encode(const asl_message& x, byte_buffer& out);
 /// "answer: entry 2: name truncated (needs 7 bytes, 3 left)" (entries count
 /// from 1). Besides truncation and trailing bytes it refuses bools other
 /// than 0/1, `query_by` above 2, `query_by::any` with a pattern, answers
-/// with more than max_answer_entries entries and responses with
-/// request_id 0. What decodes re-encodes to exactly the same bytes.
+/// with more than max_answer_entries entries, responses, reliable requests
+/// and acks with request_id 0, and reliable-request flags other than 0/1. What decodes re-encodes to exactly the same bytes.
 caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size);
 
 /// The kind of an encoded message, for counters; error on an empty or
@@ -187,5 +208,7 @@ bool operator==(const asl_subscribe& a, const asl_subscribe& b);
 bool operator==(const asl_unsubscribe& a, const asl_unsubscribe& b);
 bool operator==(const asl_publish& a, const asl_publish& b);
 bool operator==(const asl_advertise& a, const asl_advertise& b);
+bool operator==(const asl_reliable_request& a, const asl_reliable_request& b);
+bool operator==(const asl_ack& a, const asl_ack& b);
 
 } // namespace herm

@@ -621,3 +621,331 @@ TEST_F(asl_test, an_apo_registered_at_start_up_names_its_module) {
   auto ref = add(0, "early", "t", spawn_calculator(log));
   EXPECT_EQ(ref.module, id_of(0));
 }
+
+// -- reliable mode ------------------------------------------------------------------
+//
+// Requests through a binding made with `reliable`: acknowledged end to end,
+// retransmitted with backoff, delivered to the APO once per request, failed
+// with a typed error only past their deadline (docs/reliability.md).
+
+namespace {
+
+/// A test module that runs no ASL and speaks protocol 1 by hand: what it
+/// receives and a way to send.
+struct raw_peer {
+  std::shared_ptr<raw_log> got = std::make_shared<raw_log>();
+  std::function<void(const asl_message&)> send;
+
+  /// The ASL messages of type T received so far, in order.
+  template <class T>
+  std::vector<T> received() const {
+    std::vector<T> result;
+    for (auto& pkt : *got) {
+      auto m = decode_asl(pkt.payload.data(), pkt.payload.size());
+      if (m && std::holds_alternative<T>(*m))
+        result.push_back(std::get<T>(*m));
+    }
+    return result;
+  }
+};
+
+} // namespace
+
+class asl_reliable_test : public asl_test {
+public:
+  /// Modules 0 and 1 joined by Ethernet; only module `with_asl` runs an ASL,
+  /// the other is `raw`.
+  void build_half_raw(size_t with_asl) {
+    net = std::make_unique<sim_network>(*this, test_prefix());
+    net->add_module(id_of(0));
+    net->add_module(id_of(1));
+    net->connect({0, 1}, "ethernet");
+    net->on_start = [this, with_asl](size_t i, sim_network::module& m) {
+      if (i == with_asl)
+        m.apps = caf::actor_cast<caf::actor>(
+          track(spawn_app_support(sys(), m.agent, cfg)));
+    };
+    net->start();
+    net->advance(2s);
+    auto other = 1 - with_asl;
+    auto got = raw.got;
+    auto rcv = track(sys().spawn(
+      [got](network_receiver_actor::pointer)
+        -> network_receiver_actor::behavior_type {
+        return {[got](packet_delivered& x) { got->push_back(std::move(x)); }};
+      }));
+    caf::anon_send(net->at(other).agent, atom::subscribe_v, asl_protocol, rcv);
+    auto agent = net->at(other).agent;
+    auto dst = id_of(with_asl);
+    raw.send = [this, agent, dst](const asl_message& msg) {
+      byte_buffer bytes;
+      encode(msg, bytes);
+      caf::anon_send(agent, send_packet{dst, asl_protocol, prio_normal, bytes});
+      run();
+    };
+    run();
+  }
+
+  /// Sends `xs` as a request through `dst` from a fresh actor; the answer
+  /// (or error) lands in the returned slot once it arrives.
+  template <class R, class... Ts>
+  std::shared_ptr<std::vector<caf::expected<R>>> start_request(caf::actor dst,
+                                                               Ts... xs) {
+    auto result = std::make_shared<std::vector<caf::expected<R>>>();
+    sys().spawn([=](caf::event_based_actor* self) {
+      self->request(dst, caf::infinite, xs...)
+        .then([=](R& r) { result->push_back(r); },
+              [=](caf::error& err) { result->push_back(err); });
+    });
+    run();
+    return result;
+  }
+
+  byte_buffer payload_of(caf::message msg) {
+    auto bytes = marshal(sys(), msg);
+    EXPECT_TRUE(bytes);
+    return bytes ? *bytes : byte_buffer{};
+  }
+
+  raw_peer raw;
+};
+
+TEST_F(asl_reliable_test, a_lost_request_is_retransmitted_and_served_once) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto log = std::make_shared<seen>();
+  add(1, "calc", "t", spawn_calculator(log));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false, true});
+  ASSERT_TRUE(proxy) << render(proxy.error());
+  // The link drops everything for 400 ms: the first copies are lost.
+  net->silence(0);
+  auto answer = start_request<std::string>(*proxy, std::string{"hello"});
+  caf::anon_send(*proxy, int32_t{7});
+  net->advance(400ms);
+  EXPECT_TRUE(answer->empty());
+  EXPECT_TRUE(log->texts.empty());
+  net->restore(0);
+  net->advance(3s);
+  ASSERT_EQ(answer->size(), 1u);
+  ASSERT_TRUE(answer->front()) << render(answer->front().error());
+  EXPECT_EQ(*answer->front(), "echo: hello");
+  // The APO ran once for each, whatever the number of copies.
+  EXPECT_EQ(log->texts, std::vector<std::string>{"hello"});
+  EXPECT_EQ(log->numbers, std::vector<int32_t>{7});
+  auto s0 = stats(0), s1 = stats(1);
+  EXPECT_EQ(s0.reliable_sent, 2u);
+  EXPECT_GE(s0.retransmissions, 2u);
+  EXPECT_EQ(s0.acks_received, 1u); // the one-way message's
+  EXPECT_EQ(s0.pending_requests, 0u);
+  EXPECT_EQ(s1.requests_served, 1u);
+  EXPECT_EQ(s1.oneway_delivered, 1u);
+  EXPECT_EQ(s1.cached_responses, 2u);
+}
+
+TEST_F(asl_reliable_test, a_lost_response_is_sent_again_from_the_cache_and_the_apo_runs_once) {
+  build_half_raw(1);
+  auto log = std::make_shared<seen>();
+  auto ref = add(1, "calc", "t", spawn_calculator(log));
+  auto text = payload_of(caf::make_message(std::string{"once"}));
+  raw.send(asl_reliable_request{41, ref.apo, false, text});
+  auto first = raw.received<asl_response>();
+  ASSERT_EQ(first.size(), 1u);
+  ASSERT_TRUE(first[0].ok);
+  // The requester did not get it (lost) and sends the request again, now
+  // and much later: the cached response each time, the APO is not asked.
+  raw.send(asl_reliable_request{41, ref.apo, false, text});
+  net->advance(5s);
+  raw.send(asl_reliable_request{41, ref.apo, false, text});
+  auto all = raw.received<asl_response>();
+  ASSERT_EQ(all.size(), 3u);
+  EXPECT_EQ(all[1], first[0]);
+  EXPECT_EQ(all[2], first[0]);
+  EXPECT_EQ(log->texts, std::vector<std::string>{"once"});
+  EXPECT_EQ(stats(1).duplicates_suppressed, 2u);
+  EXPECT_EQ(stats(1).requests_served, 1u);
+  // The same request id from another module is another request; a plain
+  // request is never deduplicated (it is never retransmitted either).
+  raw.send(asl_request{41, ref.apo, text});
+  EXPECT_EQ(log->texts.size(), 2u);
+  // An APO error is cached like a value.
+  auto get = payload_of(caf::make_message(atom::get_v));
+  raw.send(asl_reliable_request{42, ref.apo, false, get});
+  raw.send(asl_reliable_request{42, ref.apo, false, get});
+  all = raw.received<asl_response>();
+  ASSERT_EQ(all.size(), 6u);
+  EXPECT_FALSE(all[4].ok);
+  EXPECT_EQ(all[4], all[5]);
+}
+
+TEST_F(asl_reliable_test, a_duplicate_one_way_message_is_acknowledged_not_delivered_again) {
+  build_half_raw(1);
+  auto log = std::make_shared<seen>();
+  auto ref = add(1, "calc", "t", spawn_calculator(log));
+  auto seven = payload_of(caf::make_message(int32_t{7}));
+  for (int i = 0; i < 3; ++i)
+    raw.send(asl_reliable_request{9, ref.apo, true, seven});
+  EXPECT_EQ(log->numbers, std::vector<int32_t>{7});
+  auto acks = raw.received<asl_ack>();
+  ASSERT_EQ(acks.size(), 3u);
+  EXPECT_EQ(acks[0].request_id, 9u);
+  EXPECT_TRUE(raw.received<asl_response>().empty());
+  EXPECT_EQ(stats(1).duplicates_suppressed, 2u);
+  EXPECT_EQ(stats(1).acks_sent, 3u);
+  // A copy of a request still being served gets an ack ("keep waiting").
+  auto never = payload_of(caf::make_message(atom::done_v));
+  raw.send(asl_reliable_request{10, ref.apo, false, never});
+  raw.send(asl_reliable_request{10, ref.apo, false, never});
+  acks = raw.received<asl_ack>();
+  ASSERT_EQ(acks.size(), 4u);
+  EXPECT_EQ(acks[3].request_id, 10u);
+}
+
+TEST_F(asl_reliable_test, the_sender_retransmits_with_backoff_and_drops_a_late_duplicate) {
+  cfg.retransmit_initial = 200ms;
+  cfg.retransmit_max = 800ms;
+  cfg.request_timeout = 10s;
+  build_half_raw(0);
+  apo_ref target{id_of(1), 7, "calc", "t"};
+  auto res = call<caf::actor>(asl(0), atom::bind_v, target, true);
+  ASSERT_TRUE(res) << render(res.error());
+  auto proxy = std::get<0>(*res);
+  auto answer = start_request<int32_t>(proxy, int32_t{40}, int32_t{2});
+  auto copies = [&] { return raw.received<asl_reliable_request>(); };
+  ASSERT_EQ(copies().size(), 1u);
+  auto first = copies()[0];
+  EXPECT_EQ(first.apo, 7u);
+  EXPECT_FALSE(first.oneway);
+  // Nothing comes back: copies after 200, 400 and 800 ms (then every
+  // 800 ms), identical to the first.
+  net->advance(250ms);
+  EXPECT_EQ(copies().size(), 2u);
+  net->advance(400ms);
+  EXPECT_EQ(copies().size(), 3u);
+  net->advance(800ms);
+  EXPECT_EQ(copies().size(), 4u);
+  for (auto& c : copies())
+    EXPECT_EQ(c, first);
+  EXPECT_EQ(stats(0).retransmissions, 3u);
+  // "Being served": the sender only probes at the slowest pace.
+  raw.send(asl_ack{first.request_id});
+  auto before = copies().size();
+  net->advance(700ms);
+  EXPECT_EQ(copies().size(), before);
+  // The response arrives, then a late copy of it: one answer.
+  auto sum = payload_of(caf::make_message(int32_t{42}));
+  raw.send(asl_response{first.request_id, true, sum, {}});
+  raw.send(asl_response{first.request_id, true, sum, {}});
+  raw.send(asl_ack{first.request_id});
+  net->advance(3s);
+  ASSERT_EQ(answer->size(), 1u);
+  ASSERT_TRUE(answer->front()) << render(answer->front().error());
+  EXPECT_EQ(*answer->front(), 42);
+  auto s = stats(0);
+  EXPECT_EQ(s.late_duplicates, 2u);
+  EXPECT_EQ(s.acks_received, 1u);
+  EXPECT_EQ(s.rx_unexpected_response, 0u);
+  EXPECT_EQ(s.pending_requests, 0u);
+  EXPECT_EQ(copies().size(), before); // no copy after the response
+}
+
+TEST_F(asl_reliable_test, a_destination_gone_past_the_deadline_gives_no_route_not_sooner) {
+  build(2, {{{0, 1}, "ethernet"}});
+  add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false, true});
+  ASSERT_TRUE(proxy);
+  auto watcher_log = std::make_shared<seen>();
+  auto watcher = spawn_recorder(watcher_log);
+  caf::anon_send(watcher, atom::add_v, *proxy);
+  net->kill(1);
+  auto answer = start_request<int32_t>(*proxy, int32_t{1}, int32_t{2});
+  // Well past the unreachable grace (300 ms) but before the deadline
+  // (request_timeout, 2 s): still waiting, the proxy still alive.
+  net->advance(1800ms);
+  EXPECT_TRUE(answer->empty());
+  EXPECT_TRUE(watcher_log->downs.empty());
+  net->advance(400ms);
+  ASSERT_EQ(answer->size(), 1u);
+  ASSERT_FALSE(answer->front());
+  EXPECT_TRUE(is(answer->front().error(), ec::no_route))
+    << render(answer->front().error());
+  EXPECT_EQ(stats(0).request_timeouts, 1u);
+  EXPECT_EQ(stats(0).pending_requests, 0u);
+}
+
+TEST_F(asl_reliable_test, a_reliable_rebinding_proxy_carries_a_request_across_a_restart) {
+  cfg.request_timeout = 5s;
+  build(2, {{{0, 1}, "ethernet"}});
+  auto before = std::make_shared<seen>();
+  add(1, "calc", "t", spawn_calculator(before));
+  // [reliable-bind]
+  bind_request req{query_by::name, "calc", 300};
+  req.rebind = true;   // follow the APO to a restarted module
+  req.reliable = true; // acknowledged, retransmitted, delivered once
+  // [reliable-bind-end]
+  auto proxy = bind(0, req);
+  ASSERT_TRUE(proxy);
+  net->kill(1);
+  auto answer = start_request<std::string>(*proxy, std::string{"x"});
+  net->advance(1s);
+  EXPECT_TRUE(answer->empty());
+  // The module restarts with a new calculator under the same name: the
+  // request waited and goes to it.
+  net->start_module(1);
+  net->advance(500ms);
+  auto after = std::make_shared<seen>();
+  add(1, "calc", "t", spawn_calculator(after));
+  net->advance(2s);
+  ASSERT_EQ(answer->size(), 1u);
+  ASSERT_TRUE(answer->front()) << render(answer->front().error());
+  EXPECT_EQ(*answer->front(), "echo: x");
+  EXPECT_EQ(after->texts, std::vector<std::string>{"x"});
+  EXPECT_TRUE(before->texts.empty());
+}
+
+TEST_F(asl_reliable_test, the_duplicate_cache_and_the_sender_tables_stay_bounded) {
+  cfg.reliable_cache = 16;
+  cfg.reliable_cache_ttl = 1s;
+  build_half_raw(1);
+  auto log = std::make_shared<seen>();
+  auto ref = add(1, "calc", "t", spawn_calculator(log));
+  auto x = payload_of(caf::make_message(int32_t{1}));
+  for (uint64_t id = 1; id <= 100; ++id)
+    raw.send(asl_reliable_request{id, ref.apo, true, x});
+  EXPECT_EQ(log->numbers.size(), 100u);
+  EXPECT_EQ(stats(1).cached_responses, 16u);
+  // The newest are remembered: a copy of request 100 is suppressed.
+  raw.send(asl_reliable_request{100, ref.apo, true, x});
+  EXPECT_EQ(log->numbers.size(), 100u);
+  // Entries expire after the ttl.
+  net->advance(1500ms);
+  EXPECT_EQ(stats(1).cached_responses, 0u);
+  // Malformed reliable requests and acks are dropped and counted.
+  auto before = stats(1).rx_malformed;
+  byte_buffer bad{asl_wire_version, 13, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0};
+  caf::anon_send(net->at(0).agent,
+                 send_packet{id_of(1), asl_protocol, prio_normal, bad});
+  run();
+  EXPECT_EQ(stats(1).rx_malformed, before + 1);
+}
+
+TEST_F(asl_reliable_test, a_sender_holds_at_most_max_pending_requests) {
+  cfg.max_pending = 8;
+  build_half_raw(0);
+  apo_ref target{id_of(1), 7, "calc", "t"};
+  auto res = call<caf::actor>(asl(0), atom::bind_v, target, true);
+  ASSERT_TRUE(res);
+  auto proxy = std::get<0>(*res);
+  std::vector<std::shared_ptr<std::vector<caf::expected<int32_t>>>> answers;
+  for (int i = 0; i < 10; ++i)
+    answers.push_back(start_request<int32_t>(proxy, int32_t{i}, int32_t{0}));
+  size_t refused = 0;
+  for (auto& a : answers)
+    if (!a->empty() && !a->front() && is(a->front().error(), ec::queue_full))
+      ++refused;
+  EXPECT_EQ(refused, 2u);
+  EXPECT_EQ(stats(0).pending_requests, 8u);
+  // Past the deadline every one has its typed error and the table is empty.
+  net->advance(3s);
+  for (auto& a : answers)
+    EXPECT_EQ(a->size(), 1u);
+  EXPECT_EQ(stats(0).pending_requests, 0u);
+}

@@ -96,7 +96,8 @@ const char* kind_name(const asl_message& x) {
   static const char* names[] = {"query",    "answer",    "request",
                                 "response", "watch",     "unwatch",
                                 "down",     "withdraw",  "subscribe",
-                                "unsubscribe", "publish", "advertise"};
+                                "unsubscribe", "publish", "advertise",
+                                "reliable request", "ack"};
   return names[x.index()];
 }
 
@@ -129,7 +130,8 @@ bool ends_in_payload(const asl_message& x) {
   if (auto r = std::get_if<asl_response>(&x))
     return r->ok;
   return std::holds_alternative<asl_request>(x)
-         || std::holds_alternative<asl_publish>(x);
+         || std::holds_alternative<asl_publish>(x)
+         || std::holds_alternative<asl_reliable_request>(x);
 }
 
 asl_answer largest_answer() {
@@ -188,6 +190,10 @@ std::vector<sample> samples() {
      asl_publish{s255, max32, counting(1000)}},
     {"advertise", asl_advertise{"pose"}},
     {"advertise, longest topic", asl_advertise{s255}},
+    {"reliable request", asl_reliable_request{1, 3, false, counting(20)}},
+    {"reliable one-way, empty payload", asl_reliable_request{max64, max32, true, {}}},
+    {"ack", asl_ack{1}},
+    {"ack max", asl_ack{max64}},
   };
 }
 
@@ -195,12 +201,12 @@ std::vector<sample> samples() {
 
 // -- header ----------------------------------------------------------------------
 
-TEST(asl_wire_kind, peek_reads_version_1_and_the_twelve_kinds) {
+TEST(asl_wire_kind, peek_reads_version_1_and_the_fourteen_kinds) {
   for (int k = 0; k < 256; ++k) {
     SCOPED_TRACE(k);
     auto b = bytes({1, k});
     auto kind = peek_asl_kind(b.data(), b.size());
-    if (k >= 1 && k <= 12) {
+    if (k >= 1 && k <= 14) {
       ASSERT_TRUE(kind) << render(kind.error());
       EXPECT_EQ(static_cast<int>(*kind), k);
     } else {
@@ -293,6 +299,16 @@ TEST(asl_wire_layout, subscribe_unsubscribe_and_advertise) {
 TEST(asl_wire_layout, publish) {
   EXPECT_EQ(hex(enc(asl_publish{"pose", 7, {0x01, 0x02}})),
             "01 0B 04 70 6F 73 65 07 00 00 00 01 02");
+}
+
+TEST(asl_wire_layout, reliable_request_and_ack) {
+  EXPECT_EQ(hex(enc(asl_reliable_request{0x0807060504030201, 0x2A, false,
+                                         {0xDE, 0xAD}})),
+            "01 0D 01 02 03 04 05 06 07 08 2A 00 00 00 00 DE AD");
+  EXPECT_EQ(hex(enc(asl_reliable_request{5, 0x2A, true, {}})),
+            "01 0D 05 00 00 00 00 00 00 00 2A 00 00 00 01");
+  EXPECT_EQ(hex(enc(asl_ack{0x0807060504030201})),
+            "01 0E 01 02 03 04 05 06 07 08");
 }
 
 TEST(asl_wire_layout, encode_appends_to_what_the_buffer_holds) {
@@ -455,7 +471,7 @@ TEST(asl_wire_malformed, a_version_other_than_1_is_refused_for_every_kind) {
 TEST(asl_wire_malformed, unknown_kinds_are_refused) {
   for (auto& s : samples()) {
     SCOPED_TRACE(s.name);
-    for (int k : {0, 13, 14, 100, 127, 128, 255}) {
+    for (int k : {0, 15, 16, 100, 127, 128, 255}) {
       auto b = enc(s.msg);
       b[1] = static_cast<uint8_t>(k);
       EXPECT_EQ(error_of(dec(b)), "asl: unknown kind " + std::to_string(k));
@@ -548,7 +564,7 @@ TEST(asl_wire_malformed, errors_say_what_was_wrong) {
     {"version", bytes({2, 1}), "asl: version 2, expected 1"},
     {"no kind", bytes({1}), "asl: kind truncated (needs 1 byte, 0 left)"},
     {"kind 0", bytes({1, 0}), "asl: unknown kind 0"},
-    {"kind 13", bytes({1, 13}), "asl: unknown kind 13"},
+    {"kind 15", bytes({1, 15}), "asl: unknown kind 15"},
     {"query id", bytes({1, 1, 4}),
      "query: query_id truncated (needs 4 bytes, 1 left)"},
     {"query by", bytes({1, 1, 4, 3, 2, 1}),
@@ -618,6 +634,16 @@ TEST(asl_wire_malformed, errors_say_what_was_wrong) {
      "publish: seq truncated (needs 4 bytes, 3 left)"},
     {"advertise topic", bytes({1, 12, 2, 'p'}),
      "advertise: topic truncated (needs 2 bytes, 1 left)"},
+    {"reliable request id 0", bytes({1, 13}) + zero(8) + bytes({1, 0, 0, 0, 0}),
+     "reliable request: request_id 0 (reliable requests are numbered)"},
+    {"reliable request oneway", bytes({1, 13, 1}) + zero(7) + bytes({1, 0, 0, 0, 2}),
+     "reliable request: oneway is 2, expected 0 or 1"},
+    {"reliable request apo", bytes({1, 13, 1}) + zero(7) + bytes({1, 0}),
+     "reliable request: apo truncated (needs 4 bytes, 2 left)"},
+    {"ack id 0", bytes({1, 14}) + zero(8),
+     "ack: request_id 0 (reliable requests are numbered)"},
+    {"ack trailing", bytes({1, 14, 1}) + zero(8),
+     "ack: 1 trailing byte"},
   };
   for (auto& r : rows) {
     SCOPED_TRACE(r.name);
@@ -695,7 +721,7 @@ TEST(asl_wire_robustness, the_decoder_is_total_and_what_decodes_reencodes_to_the
         x = static_cast<uint8_t>(rng());
       if (in.size() >= 2 && rng() % 4 != 0) {
         in[0] = asl_wire_version;
-        in[1] = static_cast<uint8_t>(1 + rng() % 12);
+        in[1] = static_cast<uint8_t>(1 + rng() % 14);
       }
     } else {
       in = seeds[rng() % seeds.size()];

@@ -1,6 +1,7 @@
 // Fuzz target: decode_asl and peek_asl_kind (actors/asl_wire.hpp,
 // docs/protocol.md "APO messages"): discovery queries and answers, requests,
-// responses, watch/unwatch/down, withdraw and the topic messages.
+// responses, watch/unwatch/down, withdraw, the topic messages, reliable
+// requests and acks.
 //
 // Properties checked for every input:
 // - decode_asl is total: a message or ec::invalid_parameter;
@@ -8,7 +9,8 @@
 // - the format is canonical: the message re-encodes to exactly the input,
 //   and decoding that again gives an equal message;
 // - decoded values respect the documented bounds (answer entries, string
-//   lengths, query_by, non-zero response ids, empty pattern for "any").
+//   lengths, query_by, non-zero response, reliable-request and ack ids,
+//   empty pattern for "any").
 
 #include <cstddef>
 #include <cstdint>
@@ -54,6 +56,10 @@ void check_bounds(const asl_message& m) {
     str(p->topic);
   } else if (auto* v = std::get_if<asl_advertise>(&m)) {
     str(v->topic);
+  } else if (auto* rr = std::get_if<asl_reliable_request>(&m)) {
+    HERM_FUZZ_CHECK(rr->request_id != 0);
+  } else if (auto* k = std::get_if<asl_ack>(&m)) {
+    HERM_FUZZ_CHECK(k->request_id != 0);
   }
 }
 
