@@ -53,8 +53,9 @@ struct file_config {
   std::string log_format = "text";
   /// "sharing" (default) or "stealing"; see herm::configure.
   std::string scheduler = "sharing";
-  /// Worker threads; 0: CAF's default (one per core).
-  size_t threads = 0;
+  /// Worker threads; 0: one per core (CAF's default). One by default, see
+  /// configure() in actors/runtime/system.hpp.
+  size_t threads = 1;
   /// Path of the local control socket; empty: none.
   std::string control_socket;
   /// The file it came from.

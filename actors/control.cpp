@@ -106,7 +106,16 @@ json to_json(const channel_stats& s) {
           {"rx_frames", s.rx_frames},
           {"rx_malformed", s.rx_malformed},
           {"rx_reassembly_dropped", s.rx_reassembly_dropped},
-          {"rx_duplicates", s.rx_duplicates}};
+          {"rx_duplicates", s.rx_duplicates},
+          {"tx_overload", {{"control", s.tx_overload_control},
+                           {"high", s.tx_overload_high},
+                           {"normal", s.tx_overload_normal},
+                           {"bulk", s.tx_overload_bulk}}},
+          {"backlog_bytes", s.backlog_bytes},
+          {"backlog_peak_bytes", s.backlog_peak_bytes},
+          {"backlog_limit_bytes", s.backlog_limit_bytes},
+          {"tx_bundles", s.tx_bundles},
+          {"rx_bundles", s.rx_bundles}};
 }
 
 json to_json(const channel_entry& e) {
@@ -150,7 +159,12 @@ json to_json(const routing_stats& s) {
           {"tx_update_entries", s.tx_update_entries},
           {"tx_claims", s.tx_claims},
           {"tx_conflicts", s.tx_conflicts},
-          {"tx_seqno_requests", s.tx_seqno_requests}};
+          {"tx_seqno_requests", s.tx_seqno_requests},
+          {"rx_auth_failed", s.rx_auth_failed},
+          {"rx_replayed", s.rx_replayed},
+          {"rx_unsigned", s.rx_unsigned},
+          {"rx_auth_table_full", s.rx_auth_table_full},
+          {"tx_signed", s.tx_signed}};
 }
 
 json to_json(const app_support_stats& s) {
@@ -180,7 +194,15 @@ json to_json(const app_support_stats& s) {
           {"rx_unknown_type", s.rx_unknown_type},
           {"rx_unexpected_response", s.rx_unexpected_response},
           {"tx_refused", s.tx_refused},
-          {"dropped_no_route", s.dropped_no_route}};
+          {"dropped_no_route", s.dropped_no_route},
+          {"reliable", {{"sent", s.reliable_sent},
+                        {"retransmissions", s.retransmissions},
+                        {"duplicates_suppressed", s.duplicates_suppressed},
+                        {"acks_sent", s.acks_sent},
+                        {"acks_received", s.acks_received},
+                        {"late_duplicates", s.late_duplicates},
+                        {"waited_for_route", s.reliable_waited},
+                        {"cached_responses", s.cached_responses}}}};
 }
 
 json to_json(const neighbour_info& n) {

@@ -442,9 +442,11 @@ caf::error element_error(size_t i, const std::string& name,
 
 // -- public interface ----------------------------------------------------------
 
-caf::expected<byte_buffer> marshal(caf::actor_system& sys,
-                                   const caf::message& msg) {
-  byte_buffer out;
+namespace {
+
+/// Appends the encoding of `msg` to `out`.
+caf::error marshal_to(caf::actor_system& sys, const caf::message& msg,
+                      byte_buffer& out) {
   out.push_back(apo_format_version);
   write_leb128(out, msg.size());
   apo_serializer sink{out};
@@ -464,6 +466,17 @@ caf::expected<byte_buffer> marshal(caf::actor_system& sys,
     if (auto err = msg.save(i, sink))
       return element_error(i, name, sink.reason(), err);
   }
+  return caf::none;
+}
+
+} // namespace
+
+caf::expected<byte_buffer> marshal(caf::actor_system& sys,
+                                   const caf::message& msg) {
+  byte_buffer out;
+  out.reserve(128);
+  if (auto err = marshal_to(sys, msg, out))
+    return err;
   return out;
 }
 
@@ -501,9 +514,11 @@ caf::expected<caf::message> unmarshal(caf::actor_system& sys,
   auto& types = sys.types();
   caf::detail::dynamic_message_data::elements elements;
   elements.reserve(static_cast<size_t>(count));
+  // Reused per thread: no allocation per element for the type name.
+  thread_local std::string name;
   for (size_t i = 0; i < count; ++i) {
     source.start_element();
-    std::string name;
+    name.clear();
     if (auto err = source.read_text(max_type_name, "type name", name))
       return make_error(ec::invalid_parameter, "element " + std::to_string(i)
                                                  + ": " + source.reason());
@@ -542,12 +557,16 @@ caf::expected<caf::message> unmarshal(caf::actor_system& sys,
   // Only the canonical encoding of a message is valid: this refuses
   // booleans other than 0 and 1, unsorted or duplicate map keys and any
   // other input that would decode to the same value as different bytes.
-  auto again = marshal(sys, result);
-  if (!again)
-    return std::move(again.error());
-  if (again->size() != size || !std::equal(again->begin(), again->end(), data)) {
+  // (The buffer is reused per thread: no allocation once warmed up.)
+  thread_local byte_buffer again;
+  again.clear();
+  if (auto err = marshal_to(sys, result, again))
+    return err;
+  if (again.capacity() > 64 * 1024)
+    again.shrink_to_fit(); // keep at most one large payload's worth
+  if (again.size() != size || !std::equal(again.begin(), again.end(), data)) {
     size_t at = 0;
-    while (at < size && at < again->size() && (*again)[at] == data[at])
+    while (at < size && at < again.size() && again[at] == data[at])
       ++at;
     return make_error(ec::invalid_parameter,
                       "non-canonical encoding: differs from the canonical "

@@ -14,6 +14,7 @@
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/type_ids.hpp"
 #include "channels/port.hpp"
+#include "channels/tx_backlog.hpp"
 
 namespace herm {
 
@@ -22,15 +23,18 @@ namespace {
 /// At most this many peers are remembered for channel_info::peers.
 constexpr size_t max_known_peers = 1024;
 
-/// Bound on frames waiting while the driver's transmit queue is full.
+/// Bounds on frames waiting while the driver's transmit queue is full: half
+/// a second of the link's bandwidth within 16 KiB .. 1 MiB (CAN at 1 Mbit/s:
+/// 62.5 KB, about a second of payload once frame overhead is counted; UDP:
+/// 1 MiB). A longer queue would only add latency. A packet larger than the
+/// bound is still sent whole when it finds the backlog empty.
+constexpr size_t min_backlog_bytes = 16 * 1024;
 constexpr size_t max_backlog_bytes = 1024 * 1024;
 
-/// A frame waiting for room in the driver's transmit queue.
-struct pending_frame {
-  link_addr dst;
-  uint8_t priority;
-  byte_buffer bytes;
-};
+size_t backlog_bound(const link_profile& p) {
+  return static_cast<size_t>(std::clamp<uint64_t>(
+    p.bandwidth_bps / 16, min_backlog_bytes, max_backlog_bytes));
+}
 
 struct channel_state {
   static inline const char* name = "herm.channel";
@@ -45,24 +49,45 @@ struct channel_state {
   channel_stats stats;
   byte_buffer rx_buf;
   bool tick_pending = false;
-  /// Frames the driver refused with queue_full, in order. While not empty,
-  /// new frames queue behind them so that fragments never overtake.
-  std::deque<pending_frame> backlog;
-  size_t backlog_bytes = 0;
+  /// Frames the driver refused with queue_full, one queue per priority
+  /// (channels/tx_backlog.hpp: bounded, with its drop policy).
+  tx_backlog backlog{max_backlog_bytes}; // bound set by channel_fun
   bool flush_pending = false;
   /// How long to wait before retrying a full driver queue.
   caf::timespan flush_delay{std::chrono::milliseconds(1)};
+  /// The packet being split: did any of its frames reach the driver, and
+  /// do its frames go to the backlog now?
+  bool packet_sent_any = false;
+  bool packet_in_backlog = false;
+  /// Small packets to one destination waiting to leave together in one
+  /// bundle frame (fragmentation.hpp): filled while more messages wait in
+  /// the mailbox, sent when it runs empty. Only on links with an MTU of at
+  /// least min_bundle_mtu.
+  bool bundling = false;
+  uint32_t mtu = 0;
+  byte_buffer bundle;
+  link_addr bundle_dst = 0;
+  uint8_t bundle_prio = 0;
+  size_t bundle_count = 0;
+  size_t bundle_bytes = 0;
+  /// Bundle frames received that did not decode (whole frame dropped).
+  uint64_t rx_bad_bundles = 0;
 
   /// The frame_writer of this channel's port stack.
   caf::error write_frame(link_addr dst, uint8_t prio, const uint8_t* data,
                          size_t size) {
-    if (backlog.empty()) {
-      auto err = driver->send(dst, data, size, prio);
-      if (!is(err, ec::queue_full))
-        return err;
+    if (!packet_in_backlog) {
+      if (backlog.empty()) {
+        auto err = driver->send(dst, data, size, prio);
+        if (!is(err, ec::queue_full)) {
+          packet_sent_any = packet_sent_any || !err;
+          return err;
+        }
+      }
+      backlog.open(prio, packet_sent_any);
+      packet_in_backlog = true;
     }
-    backlog.push_back(pending_frame{dst, prio, byte_buffer(data, data + size)});
-    backlog_bytes += size;
+    backlog.append(dst, data, size);
     return caf::none;
   }
 };
@@ -109,18 +134,76 @@ void schedule_flush(channel_impl self) {
 /// Hands backlogged frames to the driver until its queue is full again.
 void flush(channel_impl self) {
   auto& st = self->state;
-  while (!st.backlog.empty()) {
-    auto& f = st.backlog.front();
-    auto err = st.driver->send(f.dst, f.bytes.data(), f.bytes.size(),
-                               f.priority);
+  while (auto* f = st.backlog.front()) {
+    auto err = st.driver->send(f->dst, f->bytes.data(), f->bytes.size(),
+                               f->priority);
     if (is(err, ec::queue_full))
       break;
     if (err)
       ++st.stats.tx_dropped;
-    st.backlog_bytes -= f.bytes.size();
-    st.backlog.pop_front();
+    st.backlog.pop();
   }
   schedule_flush(self);
+}
+
+/// Sends one packet through the port stack, or queues it in the backlog.
+void send_packet(channel_impl self, link_addr dst, uint8_t prio,
+                 const uint8_t* data, size_t size) {
+  auto& st = self->state;
+  if (!st.backlog.empty()) {
+    // Queue the whole packet or none of it; a full backlog makes room by
+    // dropping less urgent packets first (tx_backlog.hpp).
+    auto frames = st.port->frames_for(size);
+    if (!st.backlog.admit(prio, tx_backlog::cost(size, frames))) {
+      ++st.stats.tx_dropped;
+      return;
+    }
+  }
+  st.packet_sent_any = false;
+  st.packet_in_backlog = false;
+  auto res = st.port->send(dst, prio, data, size);
+  if (!res) {
+    ++st.stats.tx_dropped;
+    return;
+  }
+  ++st.stats.tx_packets;
+  st.stats.tx_bytes += size;
+  st.stats.tx_frames += *res;
+  schedule_flush(self);
+}
+
+/// Sends the bundle being built: as an ordinary packet when it holds one.
+void flush_bundle(channel_impl self) {
+  auto& st = self->state;
+  if (st.bundle_count == 0)
+    return;
+  if (st.bundle_count == 1) {
+    // Header byte and length field before the packet's bytes.
+    auto* data = st.bundle.data() + st.bundle.size() - st.bundle_bytes;
+    send_packet(self, st.bundle_dst, st.bundle_prio, data, st.bundle_bytes);
+  } else {
+    st.packet_sent_any = false;
+    st.packet_in_backlog = false;
+    if (auto err = st.write_frame(st.bundle_dst, st.bundle_prio,
+                                  st.bundle.data(), st.bundle.size())) {
+      st.stats.tx_dropped += st.bundle_count;
+    } else {
+      st.stats.tx_packets += st.bundle_count;
+      st.stats.tx_bytes += st.bundle_bytes;
+      ++st.stats.tx_frames;
+      ++st.stats.tx_bundles;
+    }
+    schedule_flush(self);
+  }
+  st.bundle.clear();
+  st.bundle_count = 0;
+  st.bundle_bytes = 0;
+}
+
+/// Flushes the bundle unless more messages wait (one of them flushes it).
+void settle(channel_impl self) {
+  if (self->state.bundle_count > 0 && self->mailbox().empty())
+    flush_bundle(self);
 }
 
 void publish(channel_impl self, link_event ev) {
@@ -148,6 +231,13 @@ channel_actor::behavior_type channel_fun(channel_impl self,
   init.peer = setup.peer;
   init.port = std::move(*port);
   init.info.max_packet = init.port->max_packet();
+  init.backlog = tx_backlog{backlog_bound(init.driver->profile())};
+  init.mtu = init.driver->profile().mtu;
+  // Bundles are a fragment-header type: only on fragmenting port stacks.
+  init.bundling = init.mtu >= min_bundle_mtu
+                  && init.port->max_packet() > init.mtu;
+  if (init.bundling)
+    init.bundle.reserve(init.mtu);
   {
     // Retry a full driver queue after about 16 frame times, 1 to 20 ms.
     auto& p = init.driver->profile();
@@ -161,6 +251,7 @@ channel_actor::behavior_type channel_fun(channel_impl self,
   // The channel ends with its device.
   self->monitor(setup.device);
   self->set_down_handler([self](caf::down_msg& msg) {
+    settle(self);
     auto& readers = self->state.readers;
     auto i = std::find_if(readers.begin(), readers.end(), [&](auto& r) {
       return r.address() == msg.source;
@@ -177,28 +268,30 @@ channel_actor::behavior_type channel_fun(channel_impl self,
     [self](write_packet& msg) {
       auto& st = self->state;
       auto dst = st.peer == broadcast_addr ? msg.dst : st.peer;
-      if (!st.backlog.empty()) {
-        // Drop the whole packet rather than part of it when the backlog
-        // cannot take it.
-        auto frames = st.port->frames_for(msg.bytes.size());
-        auto need = msg.bytes.size() + frames * 2;
-        if (st.backlog_bytes + need > max_backlog_bytes) {
-          ++st.stats.tx_dropped;
-          return;
+      if (st.bundling && st.backlog.empty()
+          && bundle_cost(msg.bytes.size()) + 1 < st.mtu / 2) {
+        // A small packet: bundle it with the ones waiting behind it.
+        if (st.bundle_count > 0
+            && (dst != st.bundle_dst || msg.priority != st.bundle_prio))
+          flush_bundle(self);
+        if (!bundle_append(st.bundle, st.mtu, msg.bytes.data(),
+                           msg.bytes.size())) {
+          flush_bundle(self);
+          bundle_append(st.bundle, st.mtu, msg.bytes.data(), msg.bytes.size());
         }
-      }
-      auto res = st.port->send(dst, msg.priority, msg.bytes.data(),
-                               msg.bytes.size());
-      if (!res) {
-        ++st.stats.tx_dropped;
+        st.bundle_dst = dst;
+        st.bundle_prio = msg.priority;
+        ++st.bundle_count;
+        st.bundle_bytes += msg.bytes.size();
+        if (self->mailbox().empty())
+          flush_bundle(self);
         return;
       }
-      ++st.stats.tx_packets;
-      st.stats.tx_bytes += msg.bytes.size();
-      st.stats.tx_frames += *res;
-      schedule_flush(self);
+      flush_bundle(self); // keeps the order of packets
+      send_packet(self, dst, msg.priority, msg.bytes.data(), msg.bytes.size());
     },
     [self](atom::subscribe, channel_reader_actor& reader) -> channel_info {
+      settle(self);
       auto& readers = self->state.readers;
       if (std::find(readers.begin(), readers.end(), reader) == readers.end()) {
         self->monitor(reader);
@@ -211,6 +304,7 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       return current_info(self);
     },
     [self](atom::unsubscribe, const channel_reader_actor& reader) {
+      settle(self);
       auto& readers = self->state.readers;
       auto i = std::find(readers.begin(), readers.end(), reader);
       if (i != readers.end()) {
@@ -221,16 +315,31 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       }
     },
     [self](atom::get, atom::info) -> channel_info {
+      settle(self);
       return current_info(self);
     },
     [self](atom::get, atom::stats) -> channel_stats {
+      settle(self);
       auto& st = self->state;
       auto result = st.stats;
       st.port->add_stats(result);
-      result.rx_malformed += st.counters->malformed.load();
+      result.rx_malformed += st.counters->malformed.load() + st.rx_bad_bundles;
+      auto& bl = st.backlog.stats();
+      uint64_t* overload[] = {&result.tx_overload_control,
+                              &result.tx_overload_high,
+                              &result.tx_overload_normal,
+                              &result.tx_overload_bulk};
+      for (size_t i = 0; i < tx_backlog::classes; ++i) {
+        *overload[i] = bl.refused[i] + bl.evicted[i];
+        result.tx_dropped += bl.evicted[i]; // refusals are counted already
+      }
+      result.backlog_bytes = st.backlog.bytes();
+      result.backlog_peak_bytes = bl.peak_bytes;
+      result.backlog_limit_bytes = st.backlog.max_bytes();
       return result;
     },
     [self](atom::get, const std::string& key) -> caf::result<std::string> {
+      settle(self);
       auto res = self->state.driver->get_param(key);
       if (!res)
         return std::move(res.error());
@@ -238,6 +347,7 @@ channel_actor::behavior_type channel_fun(channel_impl self,
     },
     [self](atom::set, const std::string& key,
            const std::string& value) -> caf::result<channel_info> {
+      settle(self);
       if (key == "mtu")
         return make_error(ec::invalid_parameter,
                           "the MTU of channel " + std::to_string(self->state.info.id)
@@ -248,16 +358,32 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       return current_info(self);
     },
     [self](atom::close) {
+      flush_bundle(self);
       self->quit(make_error(ec::channel_closed,
                             "channel " + std::to_string(self->state.info.id)
                               + " closed by its owner"));
     },
     [self](frame_received& msg) {
+      settle(self);
       auto& st = self->state;
       ++st.stats.rx_frames;
       if (st.peers.size() < max_known_peers && st.peers.insert(msg.src).second)
         publish(self, link_event{0, static_cast<uint8_t>(link_event_kind::peer_heard),
                                  msg.src, st.driver->format_addr(msg.src)});
+      if (st.bundling && !msg.bytes.empty()
+          && msg.bytes[0] == bundle_header) {
+        auto ok = bundle_decode(msg.bytes.data(), msg.bytes.size(),
+                                st.info.max_packet,
+                                [&](const uint8_t* data, size_t size) {
+                                  st.rx_buf.assign(data, data + size);
+                                  deliver(self, msg.src);
+                                });
+        if (ok)
+          ++st.stats.rx_bundles;
+        else
+          ++st.rx_bad_bundles;
+        return;
+      }
       auto now = self->clock().now();
       switch (st.port->receive(msg.src, msg.bytes.data(), msg.bytes.size(),
                                now, st.rx_buf)) {
@@ -271,8 +397,12 @@ channel_actor::behavior_type channel_fun(channel_impl self,
           break;
       }
     },
-    [self](link_event& ev) { publish(self, std::move(ev)); },
+    [self](link_event& ev) {
+      settle(self);
+      publish(self, std::move(ev));
+    },
     [self](atom::tick) {
+      settle(self);
       // Both the reassembly timer and the backlog timer send tick; doing
       // both jobs on either is harmless.
       auto& st = self->state;

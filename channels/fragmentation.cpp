@@ -914,4 +914,70 @@ const reassembly_limits& reassembler::limits() const noexcept {
   return impl_->limits;
 }
 
+// -- bundles -------------------------------------------------------------------
+
+size_t bundle_cost(size_t size) noexcept {
+  size_t n = 1;
+  for (auto x = size >> 7; x != 0; x >>= 7)
+    ++n;
+  return n + size;
+}
+
+bool bundle_append(byte_buffer& frame, uint32_t mtu, const uint8_t* data,
+                   size_t size) {
+  if (size == 0 || size > max_announced_length)
+    return false;
+  auto need = bundle_cost(size) + (frame.empty() ? 1 : 0);
+  if (frame.size() + need > mtu)
+    return false;
+  if (frame.empty())
+    frame.push_back(bundle_header);
+  auto x = size;
+  while (x >= 0x80) {
+    frame.push_back(static_cast<uint8_t>(x | 0x80));
+    x >>= 7;
+  }
+  frame.push_back(static_cast<uint8_t>(x));
+  frame.insert(frame.end(), data, data + size);
+  return true;
+}
+
+namespace {
+
+/// One bundle entry's length; nullopt when truncated, too long or not
+/// minimal.
+std::optional<std::pair<size_t, size_t>> bundle_length(const uint8_t* data,
+                                                       size_t size) {
+  auto len = decode_length(data, size);
+  if (!len || (len->size > 1 && data[len->size - 1] == 0))
+    return std::nullopt;
+  return std::pair{static_cast<size_t>(len->value), len->size};
+}
+
+} // namespace
+
+bool bundle_decode(const uint8_t* data, size_t size, size_t max_packet,
+                   const std::function<void(const uint8_t*, size_t)>& emit) {
+  if (size == 0 || data[0] != bundle_header)
+    return false;
+  // First pass: check everything, so that a bad bundle delivers nothing.
+  size_t count = 0;
+  for (size_t pos = 1; pos < size;) {
+    auto len = bundle_length(data + pos, size - pos);
+    if (!len || len->first == 0 || len->first > max_packet
+        || len->first > size - pos - len->second)
+      return false;
+    pos += len->second + len->first;
+    ++count;
+  }
+  if (count < 2)
+    return false;
+  for (size_t pos = 1; pos < size;) {
+    auto len = bundle_length(data + pos, size - pos);
+    emit(data + pos + len->second, len->first);
+    pos += len->second + len->first;
+  }
+  return true;
+}
+
 } // namespace herm

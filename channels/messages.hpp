@@ -208,6 +208,21 @@ struct channel_stats {
   uint64_t rx_reassembly_dropped = 0;
   /// Duplicate or orphan fragments ignored.
   uint64_t rx_duplicates = 0;
+  /// Packets lost to overload (the transmit backlog was full), by priority:
+  /// refused on arrival or evicted for a more urgent packet. Included in
+  /// tx_dropped.
+  uint64_t tx_overload_control = 0;
+  uint64_t tx_overload_high = 0;
+  uint64_t tx_overload_normal = 0;
+  uint64_t tx_overload_bulk = 0;
+  /// The transmit backlog now and at its fullest, bytes; its bound.
+  uint64_t backlog_bytes = 0;
+  uint64_t backlog_peak_bytes = 0;
+  uint64_t backlog_limit_bytes = 0;
+  /// Bundle frames sent and received: each carried two or more small
+  /// packets (counted in tx_packets / rx_packets too).
+  uint64_t tx_bundles = 0;
+  uint64_t rx_bundles = 0;
 };
 
 template <class Inspector>
@@ -215,7 +230,10 @@ typename Inspector::result_type inspect(Inspector& f, channel_stats& x) {
   return f(caf::meta::type_name("channel_stats"), x.id, x.tx_packets,
            x.tx_bytes, x.tx_frames, x.tx_dropped, x.rx_packets, x.rx_bytes,
            x.rx_frames, x.rx_malformed, x.rx_reassembly_dropped,
-           x.rx_duplicates);
+           x.rx_duplicates, x.tx_overload_control, x.tx_overload_high,
+           x.tx_overload_normal, x.tx_overload_bulk, x.backlog_bytes,
+           x.backlog_peak_bytes, x.backlog_limit_bytes, x.tx_bundles,
+           x.rx_bundles);
 }
 
 } // namespace herm

@@ -28,12 +28,14 @@ void register_types(caf::actor_system_config& cfg) {
 } // namespace
 
 void configure(caf::actor_system_config& cfg,
-               const std::string& scheduler_policy) {
+               const std::string& scheduler_policy, size_t threads) {
   register_types(cfg);
   if (scheduler_policy == "stealing")
     cfg.set("scheduler.policy", caf::atom("stealing"));
   else
     cfg.set("scheduler.policy", caf::atom("sharing"));
+  if (threads > 0)
+    cfg.set("scheduler.max-threads", threads);
   cfg.set("logger.verbosity", caf::atom("quiet"));
 }
 

@@ -480,9 +480,7 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
 
   caf::actor_system_config sys_cfg;
-  configure(sys_cfg, cfg->scheduler);
-  if (cfg->threads > 0)
-    sys_cfg.set("scheduler.max-threads", cfg->threads);
+  configure(sys_cfg, cfg->scheduler, cfg->threads);
   hermd::add_apo_types(sys_cfg);
   caf::actor_system sys{sys_cfg};
   module_daemon d{sys, *cfg};

@@ -140,6 +140,10 @@ struct emu_config {
   uint64_t seed = 0;
   uint64_t queue = 256;
   bool create = true;
+  /// Like Ethernet's FCS and the CRCs of IEEE 1394 and USB: a frame the
+  /// medium corrupted is dropped by the receiver and counted as malformed.
+  /// false: delivered as it is (to test what the layers above catch).
+  bool frame_check = true;
 };
 
 caf::expected<emu_config> read_config(const device_config& cfg) {
@@ -194,6 +198,10 @@ caf::expected<emu_config> read_config(const device_config& cfg) {
   if (!create)
     return create.error();
   result.create = *create;
+  auto fcs = r.flag("frame_check", true);
+  if (!fcs)
+    return fcs.error();
+  result.frame_check = *fcs;
   if (auto err = r.finish())
     return err;
   result.dir = cfg.interface;
@@ -898,6 +906,17 @@ private:
                    + std::to_string(size) + "-byte datagram, MTU "
                    + std::to_string(cfg_.profile.mtu) + ")";
         handler_->on_malformed(src, why.c_str());
+        if (stopping_rx())
+          return true;
+        continue;
+      }
+      if ((hdr.flags & emu::flag_corrupted) != 0 && cfg_.frame_check) {
+        // The receiving interface's frame check fails: the frame never
+        // reaches software, as on the real medium.
+        ++rx_malformed_;
+        handler_->on_malformed(hdr.src,
+                               "emu: frame check failed (a bit was flipped "
+                               "on the medium)");
         if (stopping_rx())
           return true;
         continue;

@@ -406,7 +406,7 @@ TEST(config, fills_everything_but_the_name_with_defaults) {
   EXPECT_EQ(cfg.log_level, "info");
   EXPECT_EQ(cfg.log_format, "text");
   EXPECT_EQ(cfg.scheduler, "sharing");
-  EXPECT_EQ(cfg.threads, 0u);
+  EXPECT_EQ(cfg.threads, 1u);
   EXPECT_EQ(cfg.control_socket, default_control_socket("m"));
   EXPECT_TRUE(cfg.module.devices.empty());
   EXPECT_TRUE(cfg.device_lines.empty());
@@ -557,7 +557,7 @@ const error_case error_cases[] = {
   {"unknown_top_level_key",
    lines({"module: { name: m }", "chanels: []"}),
    "robot.yaml:2: chanels: unknown key (expected module, log, scheduler, "
-   "control, apps, channels or apos)"},
+   "control, apps, channels, apos or auth)"},
   {"top_level_is_a_list",
    lines({"- module"}),
    "robot.yaml:1: expected a map of sections, got a list"},

@@ -488,9 +488,24 @@ TEST_F(emu_driver_test, duplicate_one_delivers_every_frame_twice) {
     EXPECT_EQ(number_of(frames[i].bytes), i / 2);
 }
 
-TEST_F(emu_driver_test, corrupt_one_flips_exactly_one_payload_bit) {
+TEST_F(emu_driver_test, a_corrupted_frame_fails_the_receivers_frame_check) {
+  // As on Ethernet, IEEE 1394 or USB, whose frames carry a CRC: a frame
+  // with a flipped bit is dropped by the receiving interface and counted.
   auto a = start("fw0", {{"station", "1"}, {"corrupt", "1"}, {"seed", "7"}});
   auto b = start("fw1", {{"station", "2"}});
+  ASSERT_TRUE(a.driver && b.driver);
+  byte_buffer sent(64, 0);
+  for (int i = 0; i < 10; ++i)
+    ASSERT_FALSE(a.send(2, sent));
+  ASSERT_TRUE(b.rec->wait_malformed(10));
+  EXPECT_TRUE(b.rec->frames().empty());
+}
+
+TEST_F(emu_driver_test, corrupt_one_flips_exactly_one_payload_bit) {
+  // Without the frame check (frame_check: false) the corrupted frame is
+  // delivered, so the layers above can be tested against it.
+  auto a = start("fw0", {{"station", "1"}, {"corrupt", "1"}, {"seed", "7"}});
+  auto b = start("fw1", {{"station", "2"}, {"frame_check", "false"}});
   ASSERT_TRUE(a.driver && b.driver);
   byte_buffer sent(64, 0);
   for (int i = 0; i < 10; ++i)

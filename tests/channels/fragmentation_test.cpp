@@ -1574,3 +1574,92 @@ TEST(reassembly, a_bus_receiver_gets_every_packet_addressed_to_it) {
     EXPECT_EQ(r.r.stats().duplicates, 0u);
   }
 }
+
+// -- bundles (several small packets in one frame) ---------------------------------
+
+namespace {
+
+std::vector<byte_buffer> unbundle(const byte_buffer& frame, size_t max_packet,
+                                  bool* ok = nullptr) {
+  std::vector<byte_buffer> packets;
+  auto res = bundle_decode(frame.data(), frame.size(), max_packet,
+                           [&](const uint8_t* data, size_t size) {
+                             packets.emplace_back(data, data + size);
+                           });
+  if (ok != nullptr)
+    *ok = res;
+  return packets;
+}
+
+} // namespace
+
+TEST(bundle, packets_round_trip_in_order) {
+  byte_buffer frame;
+  std::vector<byte_buffer> packets{{1, 2, 3}, byte_buffer(200, 0xAB), {9}};
+  for (auto& p : packets)
+    ASSERT_TRUE(bundle_append(frame, 1472, p.data(), p.size()));
+  // Header, then each packet behind its LEB128 length (200 takes 2 bytes).
+  EXPECT_EQ(frame.size(), 1u + (1 + 3) + (2 + 200) + (1 + 1));
+  EXPECT_EQ(frame[0], bundle_header);
+  EXPECT_EQ(frame[1], 3);
+  EXPECT_EQ(frame[5], 0xC8); // 200 = 0x48 | 0x80, then 0x01
+  EXPECT_EQ(frame[6], 0x01);
+  bool ok = false;
+  EXPECT_EQ(unbundle(frame, 1024, &ok), packets);
+  EXPECT_TRUE(ok);
+}
+
+TEST(bundle, the_worked_example_of_the_protocol_document) {
+  // docs/protocol.md, "Bundles": "hi" and "abc" in one frame.
+  byte_buffer frame;
+  ASSERT_TRUE(bundle_append(frame, 256, reinterpret_cast<const uint8_t*>("hi"), 2));
+  ASSERT_TRUE(bundle_append(frame, 256, reinterpret_cast<const uint8_t*>("abc"), 3));
+  EXPECT_EQ(frame, (byte_buffer{0x01, 0x02, 'h', 'i', 0x03, 'a', 'b', 'c'}));
+}
+
+TEST(bundle, append_refuses_what_does_not_fit_and_leaves_the_frame_alone) {
+  byte_buffer frame;
+  byte_buffer big(250, 1);
+  ASSERT_TRUE(bundle_append(frame, 256, big.data(), big.size()));
+  auto before = frame;
+  byte_buffer small(5, 2);
+  EXPECT_FALSE(bundle_append(frame, 256, small.data(), small.size()));
+  EXPECT_EQ(frame, before);
+  EXPECT_FALSE(bundle_append(frame, 256, small.data(), 0)) << "empty packet";
+  EXPECT_EQ(bundle_cost(3), 4u);
+  EXPECT_EQ(bundle_cost(200), 202u);
+}
+
+TEST(bundle, malformed_bundles_deliver_nothing) {
+  struct row {
+    const char* what;
+    byte_buffer frame;
+  };
+  std::vector<row> rows{
+    {"empty", {}},
+    {"not a bundle", {0x00, 0x02, 'h', 'i', 0x01, 'x'}},
+    {"header only", {0x01}},
+    {"one packet", {0x01, 0x02, 'h', 'i'}},
+    {"length past the end", {0x01, 0x02, 'h', 'i', 0x05, 'a', 'b'}},
+    {"empty packet", {0x01, 0x02, 'h', 'i', 0x00}},
+    {"truncated length", {0x01, 0x02, 'h', 'i', 0x80}},
+    {"non-minimal length", {0x01, 0x02, 'h', 'i', 0x82, 0x00, 'a', 'b'}},
+    {"above max_packet", {0x01, 0x02, 'h', 'i', 0x04, 'a', 'b', 'c', 'd'}},
+  };
+  for (auto& r : rows) {
+    bool ok = true;
+    auto got = unbundle(r.frame, 3, &ok);
+    EXPECT_FALSE(ok) << r.what;
+    EXPECT_TRUE(got.empty()) << r.what;
+  }
+}
+
+TEST(bundle, a_bundle_is_malformed_for_the_reassembler) {
+  // Receivers that do not bundle (MTU below min_bundle_mtu) drop a bundle
+  // frame as malformed rather than deliver it as a packet.
+  reassembler r;
+  byte_buffer frame{0x01, 0x02, 'h', 'i', 0x03, 'a', 'b', 'c'}, out;
+  EXPECT_EQ(r.push(1, frame.data(), frame.size(), {}, out),
+            reassembler::result::dropped);
+  EXPECT_EQ(r.stats().malformed, 1u);
+}

@@ -36,6 +36,25 @@ def routing_wire():
     write(t, "claim", h("14 34 12 11 11 11 11 11 11 11 11 01 02 03 04 05 06 07 08 20"))
     write(t, "conflict", h("""15 34 12 A1 00 00 00 00 00 00 00 B2 00 00 00 00
         00 00 00 C3 00 00 00 00 00 00 00 09"""))
+    # Authenticated (docs/protocol.md, "Authentication"): the data header
+    # with flag bit 5, and a hello with a trailer (key id 1, index
+    # 0x01020304, counter 1, an 8-byte tag that no key makes).
+    write(t, "data-auth", h("10 4E 00 42 10 11 2E 01 DE AD BE EF"))
+    write(t, "hello-trailer", h("""11 4E 00 01 02 03 04 05 06 07 08 CD AB E8 03
+        01 04 03 02 01 01 00 00 00 00 00 00 00 11 22 33 44 55 66 77 88"""))
+
+
+def auth():
+    # settings (bit 0: 16-byte tags; bits 3..1: link code), mutation count,
+    # mutations (position u16, kind, value), then the packet body.
+    t = "auth"
+    hello = h("11 4E 00 01 02 03 04 05 06 07 08 CD AB E8 03")
+    write(t, "hello-unchanged", bytes([0x08, 0]) + hello)
+    write(t, "hello-flip", bytes([0x08, 1, 3, 0, 0, 0x10]) + hello)
+    write(t, "hello-tag16-cut", bytes([0x09, 1, 0, 0, 2, 0]) + hello)
+    write(t, "data-append", bytes([0x0A, 1, 0, 0, 3, 7])
+          + h("10 4E 00 42 10 11 0E 01 DE AD BE EF"))
+    write(t, "empty-body", bytes([0x08, 2, 0, 0, 1, 0, 9, 0, 0, 1]))
 
 
 def asl_wire():
@@ -56,6 +75,9 @@ def asl_wire():
     write(t, "unsubscribe", h("01 0A 04 70 6F 73 65"))
     write(t, "publish", h("01 0B 04 70 6F 73 65 07 00 00 00 01 02"))
     write(t, "advertise", h("01 0C 04 70 6F 73 65"))
+    write(t, "reliable-request", h("01 0D 01 02 03 04 05 06 07 08 2A 00 00 00 00 DE AD"))
+    write(t, "reliable-oneway", h("01 0D 05 00 00 00 00 00 00 00 2A 00 00 00 01"))
+    write(t, "ack", h("01 0E 01 02 03 04 05 06 07 08"))
 
 
 def marshal():
@@ -195,6 +217,13 @@ apos:
 """)
 
 
+def bundle():
+    # First byte: max_packet = byte * 8 + 1; then the frame.
+    write("bundle", "worked-example", h("20 01 02") + b"hi" + h("03") + b"abc")
+    write("bundle", "three", h("FF 01 01 41 81 01") + b"B" * 129 + h("01 43"))
+    write("bundle", "one-packet", h("20 01 02") + b"hi")
+
+
 def srf04():
     write("srf04", "reading", h("07 00 E8 06 45 28 00 00"))
     write("srf04", "short", h("07 00 E8"))
@@ -204,8 +233,8 @@ def main():
     if os.path.isdir(CORPUS):
         shutil.rmtree(CORPUS)
     os.makedirs(os.path.join(CORPUS, "config"))
-    for gen in (routing_wire, asl_wire, marshal, serial_framing, can_id,
-                emu_wire, fragmentation, config, srf04):
+    for gen in (routing_wire, auth, asl_wire, marshal, serial_framing, can_id,
+                emu_wire, fragmentation, bundle, config, srf04):
         gen()
     return 0
 
