@@ -92,7 +92,8 @@ void cold_start(size_t n, milliseconds hello) {
   build_mesh(net, n, 42);
   auto wall = steady_clock::now();
   net.start();
-  auto step = hello / 2;
+  // Checked every tenth of a hello interval: the figure's resolution.
+  auto step = std::max(milliseconds{1}, hello / 10);
   milliseconds t{0};
   auto limit = hello * 200;
   while (t < limit) {

@@ -336,7 +336,7 @@ class Report:
                  f"Command: `{doc.get('command', 'bench_routing_convergence')}` "
                  "(deterministic: simulated time, so one run; random meshes with "
                  "a third of the extra links 3-station CAN buses; converged is "
-                 "checked every half hello interval).", "",
+                 "checked every tenth of a hello interval).", "",
                  "| modules | converged after | update packets | update entries "
                  "per module | hellos | wall clock |",
                  "|---|---|---|---|---|---|")
@@ -417,6 +417,8 @@ class Report:
             self.out("")
             if mode in ("back-to-back", "gap-10ms"):
                 self.rtt_targets(mode, mc)
+            elif mode == "inprocess":
+                self.inprocess_targets(mc)
         self.plots["rtt"] = rtt_plot
         self.oneway(cases)
         unknown = sorted(m for m in present
@@ -487,6 +489,34 @@ class Report:
             self.out(f"| {bold}{label}{bold} | " + " | ".join(cells) + " |")
         self.out("")
         self.plots["oneway"] = plot
+        herm = [c for c in default_herm(mc) if c.get("transport") == "herm"
+                or c.get("transport", "").startswith("herm/")]
+        for c in herm:
+            d = find(mc, family="dds", size=c["size"])
+            if not (c.get("runs") and c.get("msgs_per_s") and d
+                    and d.get("msgs_per_s")):
+                continue
+            r = c["msgs_per_s"] / d["msgs_per_s"]
+            self.target(f"HERM one-way throughput above Cyclone DDS, "
+                        f"{c['size']:,} B, policy {c.get('policy') or 'default'}",
+                        f"{c['msgs_per_s']:,.0f} msg/s",
+                        f"DDS {d['msgs_per_s']:,.0f} msg/s", f"{r:.2f}×",
+                        "> 1×", r > 1)
+
+    def inprocess_targets(self, mc):
+        """APO-to-APO through a real proxy (herm-rebind) against plain CAF."""
+        proxied = [c for c in mc if c.get("transport", "").startswith("herm-rebind")
+                   and c.get("policy", "") == "sharing:1" and c.get("runs")]
+        ratios = [c["ratio_to_caf_local"] for c in proxied
+                  if c.get("ratio_to_caf_local") is not None]
+        if ratios:
+            caf = [c["p50_us"] for c in mc if c.get("transport", "").startswith("caf-local")
+                   and c.get("policy", "") == "sharing:1" and c.get("runs")]
+            self.target(f"APO-to-APO in one process through a proxy, "
+                        f"{sizes_of(proxied)}, policy sharing:1",
+                        span([c["p50_us"] for c in proxied], " µs"),
+                        f"plain CAF request {span(caf, ' µs')}",
+                        span(ratios, "×"), "≤ 2×", max(ratios) <= 2)
 
     # footprint ------------------------------------------------------------------
     def footprint(self):
