@@ -676,6 +676,38 @@ void send_ack(asl_impl self, module_id dst, uint64_t rid) {
   transmit(self, dst, asl_ack{rid});
 }
 
+/// The APO a request from `src` is for, and its payload unmarshalled; or
+/// nothing, after answering the requester with the error and counting it.
+std::optional<std::pair<caf::strong_actor_ptr, caf::message>>
+open_request(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
+             const byte_buffer& payload) {
+  auto& st = self->state;
+  auto a = st.apos.find(apo);
+  if (a == st.apos.end()) {
+    ++st.stats.rx_unknown_apo;
+    respond_error(self, src, rid,
+                  make_error(ec::apo_gone, "no APO " + std::to_string(apo)
+                                             + " on module "
+                                             + to_hex(st.self_id)));
+    return std::nullopt;
+  }
+  auto msg = unmarshal(self->system(), payload.data(), payload.size(),
+                       st.cfg.limits);
+  if (!msg) {
+    if (is(msg.error(), ec::unknown_type))
+      ++st.stats.rx_unknown_type;
+    else
+      ++st.stats.rx_malformed;
+    respond_error(self, src, rid,
+                  make_error(static_cast<ec>(msg.error().code()),
+                             "module " + to_hex(st.self_id) + ": "
+                               + context_of(msg.error())));
+    return std::nullopt;
+  }
+  return std::pair{caf::actor_cast<caf::strong_actor_ptr>(a->second),
+                   std::move(*msg)};
+}
+
 void on_reliable_request(asl_impl self, module_id src,
                          asl_reliable_request& req) {
   auto& st = self->state;
@@ -689,33 +721,14 @@ void on_reliable_request(asl_impl self, module_id src,
       send_ack(self, src, req.request_id);
     return;
   }
-  auto a = st.apos.find(req.apo);
-  if (a == st.apos.end()) {
-    ++st.stats.rx_unknown_apo;
-    respond_error(self, src, req.request_id,
-                  make_error(ec::apo_gone, "no APO " + std::to_string(req.apo)
-                                             + " on module "
-                                             + to_hex(st.self_id)));
+  auto target = open_request(self, src, req.request_id, req.apo, req.payload);
+  if (!target)
     return;
-  }
-  auto msg = unmarshal(self->system(), req.payload.data(), req.payload.size(),
-                       st.cfg.limits);
-  if (!msg) {
-    if (is(msg.error(), ec::unknown_type))
-      ++st.stats.rx_unknown_type;
-    else
-      ++st.stats.rx_malformed;
-    respond_error(self, src, req.request_id,
-                  make_error(static_cast<ec>(msg.error().code()),
-                             "module " + to_hex(st.self_id) + ": "
-                               + context_of(msg.error())));
-    return;
-  }
-  auto dst = caf::actor_cast<caf::strong_actor_ptr>(a->second);
+  auto& [dst, msg] = *target;
   if (req.oneway) {
     remember(self, key, true, true);
     ++st.stats.oneway_delivered;
-    post(self, dst, nullptr, caf::make_message_id(), std::move(*msg));
+    post(self, dst, nullptr, caf::make_message_id(), std::move(msg));
     send_ack(self, src, req.request_id);
     return;
   }
@@ -732,37 +745,18 @@ void on_reliable_request(asl_impl self, module_id src,
                                    self->clock().now() + st.cfg.request_timeout,
                                    true});
   ++st.stats.requests_served;
-  post(self, dst, st.sink, caf::make_message_id(local), std::move(*msg));
+  post(self, dst, st.sink, caf::make_message_id(local), std::move(msg));
 }
 
 void on_request(asl_impl self, module_id src, asl_request& req) {
   auto& st = self->state;
-  auto a = st.apos.find(req.apo);
-  if (a == st.apos.end()) {
-    ++st.stats.rx_unknown_apo;
-    respond_error(self, src, req.request_id,
-                  make_error(ec::apo_gone, "no APO " + std::to_string(req.apo)
-                                             + " on module "
-                                             + to_hex(st.self_id)));
+  auto target = open_request(self, src, req.request_id, req.apo, req.payload);
+  if (!target)
     return;
-  }
-  auto msg = unmarshal(self->system(), req.payload.data(), req.payload.size(),
-                       st.cfg.limits);
-  if (!msg) {
-    if (is(msg.error(), ec::unknown_type))
-      ++st.stats.rx_unknown_type;
-    else
-      ++st.stats.rx_malformed;
-    respond_error(self, src, req.request_id,
-                  make_error(static_cast<ec>(msg.error().code()),
-                             "module " + to_hex(st.self_id) + ": "
-                               + context_of(msg.error())));
-    return;
-  }
-  auto dst = caf::actor_cast<caf::strong_actor_ptr>(a->second);
+  auto& [dst, msg] = *target;
   if (req.request_id == 0) {
     ++st.stats.oneway_delivered;
-    post(self, dst, nullptr, caf::make_message_id(), std::move(*msg));
+    post(self, dst, nullptr, caf::make_message_id(), std::move(msg));
     return;
   }
   if (st.serving.size() >= st.cfg.max_pending) {
@@ -775,7 +769,7 @@ void on_request(asl_impl self, module_id src, asl_request& req) {
   st.serving.emplace(local, served{src, req.request_id,
                                    self->clock().now() + st.cfg.request_timeout});
   ++st.stats.requests_served;
-  post(self, dst, st.sink, caf::make_message_id(local), std::move(*msg));
+  post(self, dst, st.sink, caf::make_message_id(local), std::move(msg));
 }
 
 /// The local APO answered request `local` of a remote requester.

@@ -15,8 +15,8 @@
 // Fault injection (tests/faults): --emu-opt KEY=VALUE adds an option (loss,
 // corrupt, duplicate, jitter_us, latency_us, seed) to every emu device;
 // --flap AFTER:FOR[:DEVICE] sets loss 1 on the emu channels (of DEVICE
-// only, e.g. "emu1") AFTER seconds from start for FOR seconds, then puts
-// the configured loss back. Request strings carry a CRC-32 of themselves,
+// only, e.g. "emu1") AFTER seconds from start (for `call`: from its first
+// reply) for FOR seconds, then puts the configured loss back. Request strings carry a CRC-32 of themselves,
 // which the echo APO checks ("corrupt" counts mismatches) and the caller
 // compares with what it sent.
 //
@@ -56,6 +56,10 @@ using namespace std::chrono_literals;
 namespace {
 
 volatile std::sig_atomic_t stop_requested = 0;
+
+/// Set by `call` at its first reply: a caller's --flap counts from there,
+/// so that it falls among the requests however long start-up took.
+std::atomic<bool> first_reply{false};
 
 using clock_type = std::chrono::steady_clock;
 
@@ -363,6 +367,7 @@ int call(caf::scoped_actor& self, const module_handles& m, const options& o) {
         if (status == 0) {
           ++ok;
           std::cout << "reply " << i << " ok" << std::endl;
+          first_reply = true;
         } else if (status == 1) {
           ++bad;
           ++failed;
@@ -604,7 +609,12 @@ int main(int argc, char** argv) {
     for (auto& kv : o.emu_opts)
       if (kv.rfind("loss=", 0) == 0)
         loss = kv.substr(5);
-    flapper = std::thread{[&sys, &m, flap_after, flap_len, flap_device, loss] {
+    bool is_caller = call_cmd->parsed();
+    flapper = std::thread{[&sys, &m, flap_after, flap_len, flap_device, loss,
+                           is_caller] {
+      while (is_caller && !first_reply && nap(20ms)) {
+        // A caller's flap counts from its first reply.
+      }
       if (!nap(seconds(flap_after)))
         return;
       set_loss(sys, *m, flap_device, "1");
