@@ -511,16 +511,18 @@ void send_due(asl_impl self, uint32_t only_binding = 0,
 
 // -- requests ------------------------------------------------------------------------
 
-/// A request or one-way message through a reliable binding (the target is
-/// remote, or the proxy is still looking for one).
-void forward_reliable(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
-                      caf::message_id mid, caf::message& msg) {
+/// `msg` marshalled for the wire; or nothing, after refusing the sender
+/// (not marshallable, or above max_message) and counting it.
+std::optional<byte_buffer> marshal_outgoing(asl_impl self,
+                                            caf::strong_actor_ptr& sender,
+                                            caf::message_id mid,
+                                            const caf::message& msg) {
   auto& st = self->state;
   auto payload = marshal(self->system(), msg);
   if (!payload) {
     ++st.stats.tx_refused;
     refuse(self, sender, mid, std::move(payload.error()));
-    return;
+    return std::nullopt;
   }
   if (payload->size() > st.cfg.max_message) {
     ++st.stats.tx_refused;
@@ -529,8 +531,19 @@ void forward_reliable(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
                       "message of " + std::to_string(payload->size())
                         + " bytes marshalled; the limit is "
                         + std::to_string(st.cfg.max_message)));
-    return;
+    return std::nullopt;
   }
+  return std::move(*payload);
+}
+
+/// A request or one-way message through a reliable binding (the target is
+/// remote, or the proxy is still looking for one).
+void forward_reliable(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
+                      caf::message_id mid, caf::message& msg) {
+  auto& st = self->state;
+  auto payload = marshal_outgoing(self, sender, mid, msg);
+  if (!payload)
+    return;
   if (st.pending.size() >= st.cfg.max_pending) {
     ++st.stats.tx_refused;
     refuse(self, sender, mid,
@@ -597,21 +610,9 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
                                       + to_hex(b.target.module)));
     return;
   }
-  auto payload = marshal(self->system(), msg);
-  if (!payload) {
-    ++st.stats.tx_refused;
-    refuse(self, sender, mid, std::move(payload.error()));
+  auto payload = marshal_outgoing(self, sender, mid, msg);
+  if (!payload)
     return;
-  }
-  if (payload->size() > st.cfg.max_message) {
-    ++st.stats.tx_refused;
-    refuse(self, sender, mid,
-           make_error(ec::packet_too_large,
-                      "message of " + std::to_string(payload->size())
-                        + " bytes marshalled; the limit is "
-                        + std::to_string(st.cfg.max_message)));
-    return;
-  }
   if (!mid.is_request()) {
     ++st.stats.oneway_sent;
     transmit(self, b.target.module,

@@ -64,19 +64,24 @@ public:
     return c;
   }
 
-  channel_actor open(const std::string& name, int node) {
-    device_config dev{name, "can", "emu:" + dir + "/can0",
-                      {{"node", std::to_string(node)}}};
+  /// Adds the device and opens its "*" channel.
+  channel_actor open(const device_config& dev) {
     caf::error err;
     self->request(io, 5s, atom::add_v, dev)
       .receive([](device_info&) {}, [&](caf::error& e) { err = e; });
     EXPECT_FALSE(err) << render(err);
     channel_actor result;
-    self->request(io, 5s, atom::open_v, channel_request{name, "*", false})
+    self->request(io, 5s, atom::open_v, channel_request{dev.name, "*", false})
       .receive([&](channel_actor& ch, channel_info&) { result = ch; },
                [&](caf::error& e) { err = e; });
     EXPECT_FALSE(err) << render(err);
     return result;
+  }
+
+  /// A station on the emulated CAN bus of this test.
+  channel_actor open_can(const std::string& name, int node) {
+    return open(device_config{name, "can", "emu:" + dir + "/can0",
+                              {{"node", std::to_string(node)}}});
   }
 
   channel_stats stats(const channel_actor& ch) {
@@ -96,8 +101,8 @@ public:
 } // namespace
 
 TEST_F(overload, a_burst_onto_can_drops_bulk_first_and_control_gets_through) {
-  auto tx = open("can-a", 1);
-  auto rx = open("can-b", 2);
+  auto tx = open_can("can-a", 1);
+  auto rx = open_can("can-b", 2);
   ASSERT_TRUE(tx && rx);
   self->request(rx, 5s, atom::subscribe_v,
                 caf::actor_cast<channel_reader_actor>(self))
@@ -189,18 +194,8 @@ TEST_F(overload, small_packets_sent_back_to_back_travel_in_bundles_in_order) {
   // (docs/protocol.md, "Bundles"); every packet arrives once, in order.
   auto port = [](int i) { return std::to_string(47000 + (::getpid() % 2000) * 2 + i); };
   auto open_udp = [&](const std::string& name, int me, int peer) {
-    device_config dev{name, "udp", "127.0.0.1:" + port(me),
-                      {{"peers", "127.0.0.1:" + port(peer)}}};
-    caf::error err;
-    self->request(io, 5s, atom::add_v, dev)
-      .receive([](device_info&) {}, [&](caf::error& e) { err = e; });
-    EXPECT_FALSE(err) << render(err);
-    channel_actor result;
-    self->request(io, 5s, atom::open_v, channel_request{name, "*", false})
-      .receive([&](channel_actor& ch, channel_info&) { result = ch; },
-               [&](caf::error& e) { err = e; });
-    EXPECT_FALSE(err) << render(err);
-    return result;
+    return open(device_config{name, "udp", "127.0.0.1:" + port(me),
+                              {{"peers", "127.0.0.1:" + port(peer)}}});
   };
   auto tx = open_udp("udp-a", 0, 1);
   auto rx = open_udp("udp-b", 1, 0);
