@@ -385,8 +385,8 @@ channel_actor::behavior_type channel_fun(channel_impl self,
         return;
       }
       auto now = self->clock().now();
-      switch (st.port->receive(msg.src, msg.bytes.data(), msg.bytes.size(),
-                               now, st.rx_buf)) {
+      switch (st.port->receive(msg.src, msg.lane, msg.bytes.data(),
+                               msg.bytes.size(), now, st.rx_buf)) {
         case packet_port::rx::packet:
           deliver(self, msg.src);
           break;

@@ -29,12 +29,18 @@ public:
   }
 
   void on_frame(link_addr src, const uint8_t* data, size_t size) override {
+    on_frame_in_lane(src, 0, data, size);
+  }
+
+  void on_frame_in_lane(link_addr src, uint8_t lane, const uint8_t* data,
+                        size_t size) override {
     auto target = lookup(src);
     if (!target) {
       ++counters_->unclaimed;
       return;
     }
-    caf::anon_send(target, frame_received{src, byte_buffer(data, data + size)});
+    caf::anon_send(target,
+                   frame_received{src, byte_buffer(data, data + size), lane});
   }
 
   void on_malformed(link_addr, const char*) override {
@@ -157,11 +163,13 @@ device_actor::behavior_type
 device_fun(device_impl self, device_config cfg, link_driver_ptr driver,
            std::shared_ptr<device_counters> counters,
            std::shared_ptr<demux> frames) {
-  auto& st = self->state;
-  st.config = std::move(cfg);
-  st.driver = std::move(driver);
-  st.counters = std::move(counters);
-  st.frames = std::move(frames);
+  {
+    auto& st = self->state;
+    st.config = std::move(cfg);
+    st.driver = std::move(driver);
+    st.counters = std::move(counters);
+    st.frames = std::move(frames);
+  }
   self->set_down_handler([self](caf::down_msg& msg) {
     self->state.frames->remove(msg.source);
     self->state.channels.erase(msg.source);

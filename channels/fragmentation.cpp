@@ -122,14 +122,21 @@ size_t fragmenter::frames_for(size_t size) const noexcept {
   return 1 + (rest + c.chunk - 1) / c.chunk;
 }
 
-void fragmenter::split(link_addr dst, const uint8_t* data, size_t size,
+void fragmenter::split(link_addr dst, uint8_t lane, const uint8_t* data,
+                       size_t size,
                        const std::function<void(const uint8_t*, size_t)>& emit) {
-  if (tags_.size() >= max_destinations && tags_.count(dst) == 0)
+  auto key = std::pair{dst, lane};
+  if (tags_.size() >= max_sequences && tags_.count(key) == 0)
     tags_.clear();
-  auto& tag = tags_[dst];
+  auto& tag = tags_[key];
   next_tag_ = tag;
   split(data, size, emit);
   tag = next_tag_;
+}
+
+void fragmenter::split(link_addr dst, const uint8_t* data, size_t size,
+                       const std::function<void(const uint8_t*, size_t)>& emit) {
+  split(dst, 0, data, size, emit);
 }
 
 void fragmenter::split(const uint8_t* data, size_t size,
@@ -250,7 +257,30 @@ struct stash_entry {
   bool wide;
 };
 
-struct sender_state {
+/// One sender's lane (link_driver.hpp): packets in different lanes of one
+/// sender may interleave on the link, so each lane reassembles on its own.
+/// Ordered by sender first, so a sender's lanes are neighbours in a map.
+struct lane_key {
+  link_addr src;
+  uint8_t lane;
+
+  friend bool operator<(const lane_key& x, const lane_key& y) noexcept {
+    return x.src != y.src ? x.src < y.src : x.lane < y.lane;
+  }
+
+  friend bool operator==(const lane_key& x, const lane_key& y) noexcept {
+    return x.src == y.src && x.lane == y.lane;
+  }
+};
+
+struct lane_key_hash {
+  size_t operator()(const lane_key& k) const noexcept {
+    return std::hash<uint64_t>{}(k.src ^ uint64_t{k.lane} << 56);
+  }
+};
+
+/// What one lane of one sender holds.
+struct lane_state {
   std::array<std::optional<packet>, 4> packets; // by tag
   std::vector<stash_entry> stash;               // in arrival order
   size_t packet_bytes = 0;
@@ -319,19 +349,19 @@ placement place(packet& p, uint32_t seq, const uint8_t* bytes, size_t size) {
 // -- reassembler -----------------------------------------------------------------
 
 struct reassembler::impl {
-  using sender_map = std::map<link_addr, sender_state>;
-  using sender_iter = sender_map::iterator;
+  using lane_map = std::map<lane_key, lane_state>;
+  using lane_iter = lane_map::iterator;
 
-  /// Charged for every sender holding something: its map node.
-  static constexpr size_t sender_overhead
-    = sizeof(sender_map::value_type) + 4 * sizeof(void*);
+  /// Charged for every lane holding something: its map node.
+  static constexpr size_t lane_overhead
+    = sizeof(lane_map::value_type) + 4 * sizeof(void*);
 
   reassembly_limits limits;
   reassembly_stats stats;
-  sender_map senders;
-  /// One map node kept after its sender emptied, so that a lone sender does
+  lane_map lanes;
+  /// One map node kept after its lane emptied, so that a lone sender does
   /// not cost a node allocation per packet.
-  sender_map::node_type spare;
+  lane_map::node_type spare;
   /// Early fragments being moved from the stash into a new packet; reused.
   std::vector<stash_entry> early;
   size_t bytes = 0;       // everything charged, overhead included
@@ -342,37 +372,61 @@ struct reassembler::impl {
   explicit impl(reassembly_limits lim) : limits(lim) {
   }
 
-  // -- senders -------------------------------------------------------------------
+  // -- lanes and senders ---------------------------------------------------------
 
-  sender_iter sender_for(link_addr src) {
-    auto i = senders.lower_bound(src);
-    if (i != senders.end() && i->first == src)
+  lane_iter lane_for(lane_key key) {
+    auto i = lanes.lower_bound(key);
+    if (i != lanes.end() && i->first == key)
       return i;
-    bytes += sender_overhead;
+    bytes += lane_overhead;
     if (!spare.empty()) {
-      spare.key() = src;
-      return senders.insert(i, std::move(spare));
+      spare.key() = key;
+      return lanes.insert(i, std::move(spare));
     }
-    return senders.emplace_hint(i, src, sender_state{});
+    return lanes.emplace_hint(i, key, lane_state{});
   }
 
-  void release_if_empty(sender_iter i) {
+  void release_if_empty(lane_iter i) {
     if (!i->second.empty())
       return;
-    bytes -= sender_overhead;
+    bytes -= lane_overhead;
     if (spare.empty())
-      spare = senders.extract(i);
+      spare = lanes.extract(i);
     else
-      senders.erase(i);
+      lanes.erase(i);
   }
 
-  size_t sender_bytes(const sender_state& s) const noexcept {
-    return sender_overhead + s.packet_bytes + s.stash_bytes;
+  /// The lanes of sender `src`: [first, second).
+  std::pair<lane_iter, lane_iter> lanes_of(link_addr src) {
+    return {lanes.lower_bound(lane_key{src, 0}),
+            lanes.upper_bound(lane_key{src, UINT8_MAX})};
+  }
+
+  /// What sender `src` holds, over all its lanes.
+  struct usage {
+    size_t overhead = 0;
+    size_t packets = 0;
+    size_t stash = 0;
+
+    size_t total() const noexcept {
+      return overhead + packets + stash;
+    }
+  };
+
+  usage usage_of(link_addr src) const {
+    usage u;
+    for (auto i = lanes.lower_bound(lane_key{src, 0});
+         i != lanes.end() && i->first.src == src; ++i) {
+      u.overhead += lane_overhead;
+      u.packets += i->second.packet_bytes;
+      u.stash += i->second.stash_bytes;
+    }
+    return u;
   }
 
   // -- packets -------------------------------------------------------------------
 
-  void drop_packet(sender_state& s, uint8_t tag) {
+  void drop_packet(lane_state& s, uint8_t tag) {
     auto& p = *s.packets[tag];
     s.packet_bytes -= p.charge;
     bytes -= p.charge;
@@ -381,19 +435,32 @@ struct reassembler::impl {
     s.packets[tag].reset();
   }
 
-  void evict_oldest_packet(sender_state& s) {
-    std::optional<uint8_t> oldest;
-    for (uint8_t t = 0; t < 4; ++t)
-      if (s.packets[t]
-          && (!oldest || s.packets[t]->deadline < s.packets[*oldest]->deadline))
-        oldest = t;
-    drop_packet(s, *oldest);
+  /// Evicts the oldest incomplete packet of `self`'s sender, in any of its
+  /// lanes. A lane other than `self` left empty is released.
+  /// @pre the sender holds a packet
+  void evict_oldest_packet(lane_iter self) {
+    auto [first, last] = lanes_of(self->first.src);
+    auto victim = last;
+    uint8_t tag = 0;
+    for (auto i = first; i != last; ++i)
+      for (uint8_t t = 0; t < 4; ++t)
+        if (auto& p = i->second.packets[t];
+            p
+            && (victim == last
+                || p->deadline < victim->second.packets[tag]->deadline)) {
+          victim = i;
+          tag = t;
+        }
+    assert(victim != last);
+    drop_packet(victim->second, tag);
     ++stats.over_limit;
+    if (victim != self)
+      release_if_empty(victim);
   }
 
   /// Checks the CRC of a packet whose frames all arrived, delivers or drops
   /// it, and forgets it.
-  result finish(sender_iter i, uint8_t tag, byte_buffer& out) {
+  result finish(lane_iter i, uint8_t tag, byte_buffer& out) {
     auto& p = *i->second.packets[tag];
     auto r = result::dropped;
     if (crc_of(p.buf.data(), p.length) == load_le32(p.buf.data() + p.length)) {
@@ -411,7 +478,7 @@ struct reassembler::impl {
 
   // -- stash ---------------------------------------------------------------------
 
-  void erase_stash(sender_state& s, size_t index) {
+  void erase_stash(lane_state& s, size_t index) {
     auto charge = s.stash[index].charge;
     s.stash.erase(s.stash.begin() + static_cast<ptrdiff_t>(index));
     s.stash_bytes -= charge;
@@ -420,7 +487,7 @@ struct reassembler::impl {
   }
 
   /// Moves the stashed fragments of `tag` into `early`, keeping their order.
-  void take_early(sender_state& s, uint8_t tag) {
+  void take_early(lane_state& s, uint8_t tag) {
     size_t kept = 0;
     for (size_t k = 0; k < s.stash.size(); ++k) {
       auto& e = s.stash[k];
@@ -438,16 +505,18 @@ struct reassembler::impl {
     s.stash.erase(s.stash.begin() + static_cast<ptrdiff_t>(kept), s.stash.end());
   }
 
-  /// Evicts the stashed fragment that arrived first, over all senders. A
-  /// sender other than `self` left empty is released.
-  void evict_oldest_stash(sender_iter self) {
-    auto victim = senders.end();
-    for (auto i = senders.begin(); i != senders.end(); ++i)
+  /// Evicts the stashed fragment that arrived first in [first, last). A
+  /// lane other than `self` left empty is released.
+  /// @pre a lane in [first, last) holds a stashed fragment
+  void evict_oldest_stash(lane_iter first, lane_iter last, lane_iter self) {
+    auto victim = last;
+    for (auto i = first; i != last; ++i)
       if (!i->second.stash.empty()
-          && (victim == senders.end()
+          && (victim == last
               || i->second.stash.front().order
                    < victim->second.stash.front().order))
         victim = i;
+    assert(victim != last);
     erase_stash(victim->second, 0);
     ++stats.orphans;
     if (victim != self)
@@ -456,14 +525,17 @@ struct reassembler::impl {
 
   // -- memory bounds -------------------------------------------------------------
 
-  /// Whether `need` more bytes for sender `s` (null: not holding anything
-  /// yet) can fit once stashed fragments, and for a packet the sender's own
-  /// older packets, are evicted. Other senders' packets are never evicted.
-  /// Decided before anything is allocated or evicted.
-  bool can_make_room(const sender_state* s, size_t need, bool for_packet) const {
-    auto own_packets = s != nullptr ? s->packet_bytes : 0;
-    auto own_charged = s != nullptr ? sender_overhead + own_packets : 0;
-    auto own_fixed = sender_overhead + (for_packet ? 0 : own_packets);
+  /// Whether `need` more bytes for lane `key` of its sender (`exists`: the
+  /// lane holds something already) can fit once stashed fragments, and for
+  /// a packet the sender's own older packets in any of its lanes, are
+  /// evicted. Other senders' packets are never evicted. Decided before
+  /// anything is allocated or evicted.
+  bool can_make_room(lane_key key, bool exists, size_t need,
+                     bool for_packet) const {
+    auto own = usage_of(key.src);
+    auto own_charged = own.overhead + own.packets;
+    auto own_fixed = own.overhead + (exists ? 0 : lane_overhead)
+                     + (for_packet ? 0 : own.packets);
     auto others_fixed = bytes - stash_bytes - own_charged;
     return need <= limits.per_sender
            && own_fixed <= limits.per_sender - need && need <= limits.total
@@ -472,23 +544,26 @@ struct reassembler::impl {
 
   /// Makes room for `need` more bytes held by `self` (already charged for its
   /// overhead). Stashed fragments are guesses and go first, oldest first.
-  /// @pre can_make_room(&self->second, need, for_packet) held before `self`
-  ///      was created or anything was taken out of its stash
-  void make_room(sender_iter self, size_t need) {
-    auto& s = self->second;
-    while (sender_bytes(s) + need > limits.per_sender) {
-      if (!s.stash.empty()) {
-        erase_stash(s, 0);
-        ++stats.orphans;
+  /// @pre can_make_room(self->first, ..., need, for_packet) held before
+  ///      `self` was created or anything was taken out of its stash
+  void make_room(lane_iter self, size_t need) {
+    auto src = self->first.src;
+    for (;;) {
+      auto own = usage_of(src);
+      if (own.total() + need <= limits.per_sender)
+        break;
+      if (own.stash > 0) {
+        auto [first, last] = lanes_of(src);
+        evict_oldest_stash(first, last, self);
       } else {
-        evict_oldest_packet(s);
+        evict_oldest_packet(self);
       }
     }
     while (bytes + need > limits.total) {
       if (stash_bytes > 0)
-        evict_oldest_stash(self);
+        evict_oldest_stash(lanes.begin(), lanes.end(), self);
       else
-        evict_oldest_packet(s);
+        evict_oldest_packet(self);
     }
   }
 
@@ -507,7 +582,7 @@ struct reassembler::impl {
     return result::complete;
   }
 
-  result on_first(link_addr src, const uint8_t* data, size_t size,
+  result on_first(lane_key key, const uint8_t* data, size_t size,
                   time_point now, byte_buffer& out) {
     if ((data[0] & 0x07) != 0)
       return malformed();
@@ -524,8 +599,8 @@ struct reassembler::impl {
     auto stream = len->value + crc_size;
     if (first_data > stream)
       return malformed();
-    auto i = senders.find(src);
-    if (i != senders.end() && i->second.packets[tag]) {
+    auto i = lanes.find(key);
+    if (i != lanes.end() && i->second.packets[tag]) {
       auto& old = *i->second.packets[tag];
       if (old.wide == wide && old.length == len->value
           && old.first_data == first_data
@@ -538,7 +613,7 @@ struct reassembler::impl {
     }
     if (first_data == stream) {
       // The whole stream fits the first frame: nothing to hold.
-      if (i != senders.end())
+      if (i != lanes.end())
         release_if_empty(i);
       if (crc_of(body, len->value) != load_le32(body + len->value)) {
         ++stats.bad_checksum;
@@ -553,8 +628,8 @@ struct reassembler::impl {
     auto chunk = size - (wide ? 2 : 1);
     auto frames = 1 + (stream - first_data + chunk - 1) / chunk;
     auto need = stream + (frames + 7) / 8;
-    auto* known = i != senders.end() ? &i->second : nullptr;
-    if (!can_make_room(known, need, true)) {
+    auto* known = i != lanes.end() ? &i->second : nullptr;
+    if (!can_make_room(key, known != nullptr, need, true)) {
       ++stats.over_limit;
       if (known != nullptr) {
         // Early fragments of a refused packet will never be placed.
@@ -565,8 +640,8 @@ struct reassembler::impl {
       }
       return result::dropped;
     }
-    if (i == senders.end())
-      i = sender_for(src);
+    if (i == lanes.end())
+      i = lane_for(key);
     auto& s = i->second;
     take_early(s, tag);
     make_room(i, need);
@@ -587,7 +662,7 @@ struct reassembler::impl {
     bytes += need;
     ++s.packet_count;
     ++pending;
-    auto* hist = find_history(src);
+    auto* hist = find_history(key);
     for (auto& e : early) {
       if (e.wide != wide) {
         ++stats.malformed;
@@ -616,7 +691,7 @@ struct reassembler::impl {
     return result::pending;
   }
 
-  result on_consecutive(link_addr src, const uint8_t* data, size_t size,
+  result on_consecutive(lane_key key, const uint8_t* data, size_t size,
                         time_point now, byte_buffer& out) {
     bool wide = data[0] >> 6 == type_wide;
     size_t hdr = wide ? 2 : 1;
@@ -627,8 +702,8 @@ struct reassembler::impl {
                                           : data[0] & 0x0f);
     auto* body = data + hdr;
     auto n = size - hdr;
-    auto i = senders.find(src);
-    if (i != senders.end() && i->second.packets[tag]) {
+    auto i = lanes.find(key);
+    if (i != lanes.end() && i->second.packets[tag]) {
       auto& p = *i->second.packets[tag];
       if (p.wide != wide)
         return malformed();
@@ -644,14 +719,14 @@ struct reassembler::impl {
           break; // maybe early for the tag's next packet: stash it
       }
     }
-    return stash(src, i, tag, wide, seq, body, n, now);
+    return stash(key, i, tag, wide, seq, body, n, now);
   }
 
-  /// Holds a consecutive fragment that found no packet. `i` is the sender or
-  /// senders.end().
-  result stash(link_addr src, sender_iter i, uint8_t tag, bool wide,
+  /// Holds a consecutive fragment that found no packet. `i` is the lane or
+  /// lanes.end().
+  result stash(lane_key key, lane_iter i, uint8_t tag, bool wide,
                uint16_t seq, const uint8_t* body, size_t n, time_point now) {
-    if (i != senders.end()) {
+    if (i != lanes.end()) {
       // One entry per (tag, width, seq): the same fragment again is a
       // duplicate, a different one replaces the older (and staler) guess.
       auto& st = i->second.stash;
@@ -670,15 +745,14 @@ struct reassembler::impl {
       }
     }
     auto need = sizeof(stash_entry) + n;
-    if (!can_make_room(i != senders.end() ? &i->second : nullptr, need,
-                       false)) {
+    if (!can_make_room(key, i != lanes.end(), need, false)) {
       ++stats.orphans;
-      if (i != senders.end())
+      if (i != lanes.end())
         release_if_empty(i);
       return result::dropped;
     }
-    if (i == senders.end())
-      i = sender_for(src);
+    if (i == lanes.end())
+      i = lane_for(key);
     make_room(i, need);
     auto& s = i->second;
     s.stash.push_back(stash_entry{byte_buffer(body, body + n),
@@ -690,13 +764,13 @@ struct reassembler::impl {
     return result::pending;
   }
 
-  result push(link_addr src, const uint8_t* data, size_t size, time_point now,
+  result push(lane_key key, const uint8_t* data, size_t size, time_point now,
               byte_buffer& out) {
     if (size == 0 || data == nullptr)
       return malformed();
     auto tag = static_cast<uint8_t>(data[0] >> 4 & 0x03);
     if (data[0] >> 6 == type_single) {
-      if (auto* hist = find_history(src))
+      if (auto* hist = find_history(key))
         hist->started(tag);
       return on_single(data, size, out);
     }
@@ -708,9 +782,9 @@ struct reassembler::impl {
     // as a duplicate only until then.
     auto hash = std::hash<std::string_view>{}(
       std::string_view{reinterpret_cast<const char*>(data), size});
-    auto si = senders.find(src);
-    bool in_progress = si != senders.end() && si->second.packets[tag];
-    if (auto* hist = find_history(src); hist != nullptr) {
+    auto si = lanes.find(key);
+    bool in_progress = si != lanes.end() && si->second.packets[tag];
+    if (auto* hist = find_history(key); hist != nullptr) {
       auto& h = hist->tags[tag];
       if (h.completed && !in_progress && !hist->moved_on(tag)
           && h.contains(hash)) {
@@ -719,11 +793,11 @@ struct reassembler::impl {
       }
     }
     bool first = data[0] >> 6 == type_first;
-    auto res = first ? on_first(src, data, size, now, out)
-                     : on_consecutive(src, data, size, now, out);
+    auto res = first ? on_first(key, data, size, now, out)
+                     : on_consecutive(key, data, size, now, out);
     // Remember only frames that were taken: refusing allocates nothing.
     if (res != result::dropped) {
-      auto& hist = history(src);
+      auto& hist = history(key);
       auto& h = hist.tags[tag];
       if (first) {
         hist.started(tag);
@@ -784,7 +858,7 @@ struct reassembler::impl {
     }
   };
 
-  struct sender_history {
+  struct lane_history {
     std::array<tag_history, 4> tags;
     /// Per tag: the other tags whose packets started since its last one.
     std::array<uint8_t, 4> seen_since{};
@@ -801,41 +875,41 @@ struct reassembler::impl {
     }
   };
 
-  /// Bounded: forgetting every sender's history costs at most a missed
+  /// Bounded: forgetting every lane's history costs at most a missed
   /// duplicate, which the window and the CRC still catch.
-  static constexpr size_t max_recent_senders = 4096;
+  static constexpr size_t max_recent_lanes = 4096;
 
-  sender_history* find_history(link_addr src) {
-    if (last_hist != nullptr && last_src == src)
+  lane_history* find_history(lane_key key) {
+    if (last_hist != nullptr && last_key == key)
       return last_hist;
-    auto i = recent.find(src);
+    auto i = recent.find(key);
     if (i == recent.end())
       return nullptr;
-    last_src = src;
+    last_key = key;
     return last_hist = &i->second;
   }
 
-  sender_history& history(link_addr src) {
-    if (auto* h = find_history(src))
+  lane_history& history(lane_key key) {
+    if (auto* h = find_history(key))
       return *h;
-    if (recent.size() >= max_recent_senders) {
+    if (recent.size() >= max_recent_lanes) {
       recent.clear();
       last_hist = nullptr;
     }
-    last_src = src;
+    last_key = key;
     // References into an unordered_map survive rehashing.
-    return *(last_hist = &recent[src]);
+    return *(last_hist = &recent[key]);
   }
 
-  std::unordered_map<link_addr, sender_history> recent;
-  link_addr last_src = 0;
-  sender_history* last_hist = nullptr;
+  std::unordered_map<lane_key, lane_history, lane_key_hash> recent;
+  lane_key last_key{0, 0};
+  lane_history* last_hist = nullptr;
 
   // -- time ----------------------------------------------------------------------
 
   size_t expire(time_point now) {
     size_t dropped = 0;
-    for (auto i = senders.begin(); i != senders.end();) {
+    for (auto i = lanes.begin(); i != lanes.end();) {
       auto& s = i->second;
       for (uint8_t t = 0; t < 4; ++t) {
         if (s.packets[t] && s.packets[t]->deadline <= now) {
@@ -863,7 +937,7 @@ struct reassembler::impl {
       if (!first || t < *first)
         first = t;
     };
-    for (auto& [src, s] : senders) {
+    for (auto& [key, s] : lanes) {
       for (auto& p : s.packets)
         if (p)
           consider(p->deadline);
@@ -884,10 +958,16 @@ reassembler::reassembler(reassembler&&) noexcept = default;
 
 reassembler& reassembler::operator=(reassembler&&) noexcept = default;
 
+reassembler::result reassembler::push(link_addr src, uint8_t lane,
+                                      const uint8_t* data, size_t size,
+                                      time_point now, byte_buffer& out) {
+  return impl_->push(lane_key{src, lane}, data, size, now, out);
+}
+
 reassembler::result reassembler::push(link_addr src, const uint8_t* data,
                                       size_t size, time_point now,
                                       byte_buffer& out) {
-  return impl_->push(src, data, size, now, out);
+  return impl_->push(lane_key{src, 0}, data, size, now, out);
 }
 
 size_t reassembler::expire(time_point now) {

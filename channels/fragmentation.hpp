@@ -52,23 +52,31 @@ public:
              const std::function<void(const uint8_t*, size_t)>& emit);
 
   /// Like split(), with one packet tag sequence per destination link
-  /// address. On a multi-access link a receiver hears only the packets
-  /// addressed to it (and broadcasts): with a tag sequence per destination
-  /// it still sees every tag of its own stream in order, which is what
-  /// tells a new packet from a late duplicate of an earlier one with the
-  /// same first frame (short frames make equal first frames common: on CAN
-  /// they hold only the routing header). Remembers at most
-  /// `max_destinations` sequences; beyond that it starts over.
+  /// address and lane (link_driver.hpp). On a multi-access link a receiver
+  /// hears only the packets addressed to it (and broadcasts): with a tag
+  /// sequence per destination it still sees every tag of its own stream in
+  /// order, which is what tells a new packet from a late duplicate of an
+  /// earlier one with the same first frame (short frames make equal first
+  /// frames common: on CAN they hold only the routing header). With one
+  /// per lane as well, each of the receiver's reassembly lanes sees a whole
+  /// sequence too, and packets of different lanes, which may interleave on
+  /// the link, are told apart by the lane, not by the tag. Remembers at
+  /// most `max_sequences` sequences; beyond that it starts over.
+  void split(link_addr dst, uint8_t lane, const uint8_t* data, size_t size,
+             const std::function<void(const uint8_t*, size_t)>& emit);
+
+  /// split(dst, 0, data, size, emit).
   void split(link_addr dst, const uint8_t* data, size_t size,
              const std::function<void(const uint8_t*, size_t)>& emit);
 
-  static constexpr size_t max_destinations = 1024;
+  /// 256 CAN nodes times 16 lanes.
+  static constexpr size_t max_sequences = 4096;
 
 private:
   uint32_t mtu_;
   uint8_t next_tag_ = 0;
   byte_buffer scratch_;
-  std::map<link_addr, uint8_t> tags_;
+  std::map<std::pair<link_addr, uint8_t>, uint8_t> tags_;
 };
 
 /// Bounds on reassembly. Whatever exceeds them is dropped and counted.
@@ -94,7 +102,7 @@ struct reassembly_stats {
   uint64_t over_limit = 0;     ///< packets refused or evicted by memory bounds
   uint64_t bad_checksum = 0;   ///< packets whose CRC-32 did not match
   uint64_t superseded = 0;     ///< incomplete packets replaced by a new first
-                               ///< fragment with the same tag
+                               ///< fragment with the same lane and tag
 };
 
 /// Reassembles packets from frames of many senders on one link, tolerating
@@ -104,6 +112,11 @@ struct reassembly_stats {
 /// carry no sequence number: a duplicated single frame is delivered twice.
 /// A packet above 2^21 - 1 bytes cannot be fragmented: frames_for() is 0
 /// and split() emits nothing.
+///
+/// Packets are reassembled per (sender, lane, tag): frames of one sender's
+/// different lanes (link_driver.hpp) may interleave in any way, e.g. a CAN
+/// control packet's frames overtaking a bulk packet's, whatever their tags.
+/// The memory bounds are per sender, over all its lanes.
 class reassembler {
 public:
   using time_point = std::chrono::steady_clock::time_point;
@@ -126,8 +139,13 @@ public:
 
   reassembler& operator=(reassembler&&) noexcept;
 
-  /// Feeds one frame from `src` received at `now`. On `complete`, the packet
-  /// is moved into `out` (its previous contents are discarded).
+  /// Feeds one frame from `src` that travelled in `lane`, received at
+  /// `now`. On `complete`, the packet is moved into `out` (its previous
+  /// contents are discarded).
+  result push(link_addr src, uint8_t lane, const uint8_t* data, size_t size,
+              time_point now, byte_buffer& out);
+
+  /// push(src, 0, data, size, now, out): for links with one lane.
   result push(link_addr src, const uint8_t* data, size_t size, time_point now,
               byte_buffer& out);
 

@@ -11,7 +11,16 @@ namespace herm {
 
 frame_handler::~frame_handler() = default;
 
+void frame_handler::on_frame_in_lane(link_addr src, uint8_t, const uint8_t* data,
+                                     size_t size) {
+  on_frame(src, data, size);
+}
+
 link_driver::~link_driver() = default;
+
+uint8_t link_driver::lane(link_addr, uint8_t) const {
+  return 0;
+}
 
 caf::error link_driver::set_param(const std::string& key, const std::string&) {
   return make_error(ec::invalid_parameter,

@@ -13,6 +13,19 @@
 
 namespace herm {
 
+/// Lanes: the order a link keeps between one sender's frames. Frames of one
+/// sender in one lane arrive in the order they were sent; frames in
+/// different lanes may overtake each other. On CAN a lane is what the
+/// identifier says about order (priority, and whether the frame is a
+/// broadcast): a controller's transmit queue sends the most urgent
+/// identifier first, so a control frame overtakes bulk frames queued
+/// before it, while frames with one identifier stay in order (as ISO-TP
+/// also needs). Links that keep every frame in order use lane 0 only.
+/// The fragment layer keeps one tag sequence and one reassembly per
+/// (sender, lane), so packets in different lanes never collide
+/// (docs/protocol.md, "Fragment header").
+constexpr uint8_t max_lanes = 16;
+
 /// Receives what a driver hears.
 ///
 /// Threading: a driver calls these from its own receive thread (descriptor
@@ -25,6 +38,12 @@ public:
   /// One frame of at most MTU bytes from `src`. `data` is valid only during
   /// the call.
   virtual void on_frame(link_addr src, const uint8_t* data, size_t size) = 0;
+
+  /// One frame of at most MTU bytes from `src` that travelled in `lane`
+  /// (< max_lanes; see above). Drivers of links with lanes call this one.
+  /// Default: on_frame(src, data, size), for handlers that ignore lanes.
+  virtual void on_frame_in_lane(link_addr src, uint8_t lane,
+                                const uint8_t* data, size_t size);
 
   /// A frame the driver itself could not accept (oversized, truncated, bad
   /// medium header). It is dropped; the handler counts it.
@@ -62,6 +81,11 @@ public:
   virtual caf::error send(link_addr dst, const uint8_t* data, size_t size,
                           uint8_t priority)
     = 0;
+
+  /// The lane (< max_lanes) in which frames sent to `dst` with `priority`
+  /// travel: the one receivers see in frame_handler::on_frame_in_lane.
+  /// Default: 0, for links that keep every frame in order.
+  virtual uint8_t lane(link_addr dst, uint8_t priority) const;
 
   /// The link's characteristics (bandwidth, MTU, multi-access, cost).
   virtual const link_profile& profile() const = 0;

@@ -102,15 +102,17 @@ typename Inspector::result_type inspect(Inspector& f, link_event& x) {
 
 // -- driver -> channel / device ----------------------------------------------------
 
-/// One frame as received by a driver (at most MTU bytes).
+/// One frame as received by a driver (at most MTU bytes), with the lane it
+/// travelled in (link_driver.hpp: 0 on links that keep frames in order).
 struct frame_received {
   link_addr src = 0;
   byte_buffer bytes;
+  uint8_t lane = 0;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, frame_received& x) {
-  return f(caf::meta::type_name("frame_received"), x.src, x.bytes);
+  return f(caf::meta::type_name("frame_received"), x.src, x.bytes, x.lane);
 }
 
 /// A driver failed for good (socket error, device removed).

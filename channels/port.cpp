@@ -24,6 +24,10 @@ size_t packet_port::frames_for(size_t) const {
   return 1;
 }
 
+uint8_t packet_port::lane(link_addr, uint8_t) const {
+  return 0;
+}
+
 // -- frame_port ----------------------------------------------------------------
 
 frame_port::frame_port(link_driver_ptr driver, frame_writer writer)
@@ -47,10 +51,14 @@ caf::expected<size_t> frame_port::send(link_addr dst, uint8_t priority,
   return size_t{1};
 }
 
-packet_port::rx frame_port::receive(link_addr, const uint8_t* data,
+packet_port::rx frame_port::receive(link_addr, uint8_t, const uint8_t* data,
                                     size_t size, time_point, byte_buffer& out) {
   out.assign(data, data + size);
   return rx::packet;
+}
+
+uint8_t frame_port::lane(link_addr dst, uint8_t priority) const {
+  return driver_->lane(dst, priority);
 }
 
 // -- fragmenting_port ------------------------------------------------------------
@@ -78,7 +86,8 @@ caf::expected<size_t> fragmenting_port::send(link_addr dst, uint8_t priority,
                         + std::to_string(reassembler_.limits().max_packet));
   size_t frames = 0;
   caf::error err;
-  fragmenter_.split(dst, data, size, [&](const uint8_t* frame, size_t len) {
+  auto lane = inner_->lane(dst, priority);
+  fragmenter_.split(dst, lane, data, size, [&](const uint8_t* frame, size_t len) {
     if (err)
       return;
     auto res = inner_->send(dst, priority, frame, len);
@@ -92,10 +101,10 @@ caf::expected<size_t> fragmenting_port::send(link_addr dst, uint8_t priority,
   return frames;
 }
 
-packet_port::rx fragmenting_port::receive(link_addr src, const uint8_t* data,
-                                          size_t size, time_point now,
-                                          byte_buffer& out) {
-  switch (inner_->receive(src, data, size, now, frame_)) {
+packet_port::rx fragmenting_port::receive(link_addr src, uint8_t lane,
+                                          const uint8_t* data, size_t size,
+                                          time_point now, byte_buffer& out) {
+  switch (inner_->receive(src, lane, data, size, now, frame_)) {
     case rx::packet:
       break;
     case rx::pending:
@@ -103,7 +112,8 @@ packet_port::rx fragmenting_port::receive(link_addr src, const uint8_t* data,
     case rx::dropped:
       return rx::dropped;
   }
-  switch (reassembler_.push(src, frame_.data(), frame_.size(), now, out)) {
+  switch (reassembler_.push(src, lane, frame_.data(), frame_.size(), now,
+                            out)) {
     case reassembler::result::complete:
       return rx::packet;
     case reassembler::result::pending:
@@ -112,6 +122,10 @@ packet_port::rx fragmenting_port::receive(link_addr src, const uint8_t* data,
       break;
   }
   return rx::dropped;
+}
+
+uint8_t fragmenting_port::lane(link_addr dst, uint8_t priority) const {
+  return inner_->lane(dst, priority);
 }
 
 size_t fragmenting_port::expire(time_point now) {

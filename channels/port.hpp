@@ -38,10 +38,21 @@ public:
 
   enum class rx { packet, pending, dropped };
 
-  /// Feeds one received frame. On rx::packet, `out` holds the packet.
-  virtual rx receive(link_addr src, const uint8_t* data, size_t size,
-                     time_point now, byte_buffer& out)
+  /// Feeds one received frame that travelled in `lane` (link_driver.hpp).
+  /// On rx::packet, `out` holds the packet.
+  virtual rx receive(link_addr src, uint8_t lane, const uint8_t* data,
+                     size_t size, time_point now, byte_buffer& out)
     = 0;
+
+  /// Feeds one received frame of lane 0.
+  rx receive(link_addr src, const uint8_t* data, size_t size, time_point now,
+             byte_buffer& out) {
+    return receive(src, 0, data, size, now, out);
+  }
+
+  /// The lane in which packets to `dst` with `priority` travel (the
+  /// driver's link_driver::lane).
+  virtual uint8_t lane(link_addr dst, uint8_t priority) const;
 
   /// Drops what has waited too long; returns how many packets were dropped.
   virtual size_t expire(time_point now);
@@ -72,8 +83,12 @@ public:
   caf::expected<size_t> send(link_addr dst, uint8_t priority,
                              const uint8_t* data, size_t size) override;
 
-  rx receive(link_addr src, const uint8_t* data, size_t size, time_point now,
-             byte_buffer& out) override;
+  using packet_port::receive;
+
+  rx receive(link_addr src, uint8_t lane, const uint8_t* data, size_t size,
+             time_point now, byte_buffer& out) override;
+
+  uint8_t lane(link_addr dst, uint8_t priority) const override;
 
 private:
   link_driver_ptr driver_;
@@ -81,6 +96,9 @@ private:
 };
 
 /// Decorator: fragments packets for the wrapped port's MTU and reassembles.
+/// One packet tag sequence per (destination, lane) and one reassembly per
+/// (source, lane): packets in different lanes may interleave on the link
+/// (CAN: control frames overtake bulk frames) whatever their tags.
 class fragmenting_port : public packet_port {
 public:
   fragmenting_port(std::unique_ptr<packet_port> inner, uint32_t inner_mtu,
@@ -91,8 +109,12 @@ public:
   caf::expected<size_t> send(link_addr dst, uint8_t priority,
                              const uint8_t* data, size_t size) override;
 
-  rx receive(link_addr src, const uint8_t* data, size_t size, time_point now,
-             byte_buffer& out) override;
+  using packet_port::receive;
+
+  rx receive(link_addr src, uint8_t lane, const uint8_t* data, size_t size,
+             time_point now, byte_buffer& out) override;
+
+  uint8_t lane(link_addr dst, uint8_t priority) const override;
 
   size_t expire(time_point now) override;
 

@@ -299,6 +299,14 @@ public:
     return cfg_.node;
   }
 
+  /// can::lane_of the identifier a frame to `dst` with `priority` gets.
+  uint8_t lane(link_addr dst, uint8_t priority) const override {
+    can::frame_id id;
+    id.priority = std::min(priority, can::max_priority);
+    id.dst = dst == broadcast_addr ? can::broadcast_node(cfg_.format) : 1;
+    return can::lane_of(cfg_.format, id);
+  }
+
   std::string format_addr(link_addr addr) const override {
     if (addr == broadcast_addr)
       return "*";
@@ -431,7 +439,8 @@ protected:
       return;
     }
     ++rx_frames_;
-    h.on_frame(id.src, f.data, payload);
+    h.on_frame_in_lane(id.src, can::lane_of(cfg_.format, id), f.data,
+                       payload);
   }
 
   void malformed(frame_handler& h, link_addr src, const std::string& why) {
@@ -1035,10 +1044,11 @@ private:
   };
 
   /// std::*_heap comparator of the transmit queue: most urgent priority
-  /// first, FIFO within a priority. Not by full identifier, as a controller
-  /// with several mailboxes might: that would let unicasts overtake a
-  /// broadcast of the same priority (its destination field is 0xFF), and
-  /// HERM's 2-bit packet tags tolerate little reordering between packets.
+  /// first, FIFO within a priority, so a control frame overtakes bulk
+  /// frames queued before it. Receivers reassemble per lane (priority and
+  /// broadcast, can::lane_of), so that costs no packet. (A controller whose
+  /// mailboxes arbitrate by full identifier also lets unicasts overtake a
+  /// broadcast of the same priority: another lane, also harmless.)
   static bool later(const tx_frame& x, const tx_frame& y) {
     return x.order != y.order ? x.order > y.order : x.seq > y.seq;
   }

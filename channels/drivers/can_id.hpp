@@ -222,6 +222,21 @@ constexpr bool accepts(id_format f, uint8_t self, uint8_t dst) {
   return dst == self || dst == broadcast_node(f);
 }
 
+/// The lane (link_driver.hpp) of a frame: 2 * priority, plus 1 for a
+/// broadcast; 0..15. Frames of one sender in one lane have one identifier
+/// (but for CAN FD padding), so they leave in order from a FIFO queue (the
+/// kernel's, the emulated controller's) and from a controller whose
+/// mailboxes arbitrate by identifier alike; frames of different lanes may
+/// overtake each other in either. The sender and the receiver compute the
+/// lane from the same fields, so each of a receiver's lanes from one sender
+/// carries exactly one of the sender's packet tag sequences.
+constexpr uint8_t lane_of(id_format f, const frame_id& x) {
+  auto prio = x.priority < max_priority ? x.priority : max_priority;
+  return static_cast<uint8_t>(prio << 1 | (x.dst == broadcast_node(f) ? 1 : 0));
+}
+
+static_assert(lane_of(id_format::ext29, {max_priority, 0xFF, 1, 0}) == 15);
+
 /// A kernel receive filter (struct can_filter fields) that passes the frames
 /// whose destination field is `dst`. Its mask includes CAN_EFF_FLAG so that
 /// frames of the other identifier length do not pass. It leaves out the

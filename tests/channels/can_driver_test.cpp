@@ -23,6 +23,7 @@
 #include <cstring>
 #include <ftw.h>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -97,6 +98,7 @@ public:
     link_addr src;
     byte_buffer bytes;
     int64_t at_ns; // CLOCK_MONOTONIC time of the on_frame call
+    uint8_t lane = 0;
   };
 
   struct malformed {
@@ -110,9 +112,14 @@ public:
   };
 
   void on_frame(link_addr src, const uint8_t* data, size_t size) override {
+    on_frame_in_lane(src, 0, data, size);
+  }
+
+  void on_frame_in_lane(link_addr src, uint8_t lane, const uint8_t* data,
+                        size_t size) override {
     auto at = now_ns();
     std::lock_guard<std::mutex> guard{mtx_};
-    frames_.push_back({src, byte_buffer(data, data + size), at});
+    frames_.push_back({src, byte_buffer(data, data + size), at, lane});
     cv_.notify_all();
   }
 
@@ -336,6 +343,33 @@ TEST(can_id, broadcast_is_the_all_ones_destination_and_every_node_accepts_it) {
     EXPECT_TRUE(can::accepts(f, 7, b));
     EXPECT_TRUE(can::accepts(f, 7, 7));
     EXPECT_FALSE(can::accepts(f, 7, 8));
+  }
+}
+
+TEST(can_id, the_lane_is_the_priority_and_whether_the_frame_is_a_broadcast) {
+  // Frames of one lane share an identifier (but for CAN FD padding), so
+  // they keep their order in any transmit queue; the receiver reassembles
+  // per lane (docs/protocol.md, "CAN identifier layout").
+  struct {
+    uint8_t priority;
+    bool broadcast;
+    uint8_t lane;
+  } cases[] = {
+    {0, false, 0}, {0, true, 1},  {1, false, 2},  {2, true, 5},
+    {3, false, 6}, {3, true, 7},  {7, false, 14}, {7, true, 15},
+  };
+  for (auto f : {id_format::ext29, id_format::std11}) {
+    for (auto& c : cases) {
+      SCOPED_TRACE(std::to_string(c.priority) + (c.broadcast ? " broadcast" : ""));
+      frame_id x{c.priority, c.broadcast ? can::broadcast_node(f) : uint8_t{4},
+                 3, 0};
+      EXPECT_EQ(can::lane_of(f, x), c.lane);
+      // The receiver computes it from the decoded identifier.
+      frame_id y;
+      ASSERT_EQ(can::decode_id(f, can::to_can_id(f, x), y), id_status::ok);
+      EXPECT_EQ(can::lane_of(f, y), c.lane);
+      EXPECT_LT(c.lane, max_lanes);
+    }
   }
 }
 
@@ -767,6 +801,28 @@ TEST_F(can_emu_test, three_stations_hear_broadcasts_and_filter_unicasts_by_desti
   auto at_a = a.rec->frames();
   ASSERT_EQ(at_a.size(), 1u);
   EXPECT_EQ(text_of(at_a[0].bytes), "marker");
+}
+
+TEST_F(can_emu_test, receivers_hear_each_frame_in_the_lane_its_sender_chose) {
+  auto a = start("can0", {{"node", "1"}});
+  auto b = start("can1", {{"node", "2"}});
+  ASSERT_TRUE(a.driver && b.driver);
+  struct {
+    link_addr dst;
+    uint8_t priority;
+  } sends[] = {{2, prio_bulk}, {2, prio_control}, {broadcast_addr, prio_bulk},
+               {broadcast_addr, prio_control}, {2, 9}};
+  for (auto& x : sends)
+    ASSERT_FALSE(a.send(x.dst, bytes_of("x"), x.priority));
+  ASSERT_TRUE(b.rec->wait_frames(std::size(sends)));
+  std::multiset<uint8_t> want;
+  for (auto& x : sends)
+    want.insert(a.driver->lane(x.dst, x.priority));
+  EXPECT_EQ(want, (std::multiset<uint8_t>{0, 1, 6, 7, 14}));
+  std::multiset<uint8_t> heard;
+  for (auto& f : b.rec->frames())
+    heard.insert(f.lane);
+  EXPECT_EQ(heard, want);
 }
 
 TEST_F(can_emu_test, send_enforces_the_mtu_and_node_addresses) {
@@ -1611,6 +1667,9 @@ TEST_F(socketcan, broadcast_reaches_every_other_node_and_unicast_only_its_own) {
   EXPECT_EQ(text_of(b.rec->frames()[1].bytes), "to b");
   EXPECT_EQ(text_of(c.rec->frames()[0].bytes), "all");
   EXPECT_EQ(text_of(c.rec->frames()[1].bytes), "to c");
+  // Lanes (can::lane_of) at prio_normal: 5 for the broadcast, 4 unicast.
+  EXPECT_EQ(b.rec->frames()[0].lane, 5);
+  EXPECT_EQ(b.rec->frames()[1].lane, 4);
   // The kernel filter kept the other unicast away.
   EXPECT_EQ(b.counter("rx_filtered"), 0u);
   ASSERT_FALSE(b.send(1, bytes_of("marker")));

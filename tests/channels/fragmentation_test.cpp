@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdlib>
 #include <functional>
 #include <new>
@@ -15,9 +16,11 @@
 #include <string>
 #include <string_view>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "channels/fragmentation.hpp"
+#include "channels/link_driver.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
@@ -1573,6 +1576,242 @@ TEST(reassembly, a_bus_receiver_gets_every_packet_addressed_to_it) {
     EXPECT_EQ(r.delivered.size(), 20u);
     EXPECT_EQ(r.r.stats().duplicates, 0u);
   }
+}
+
+// -- lanes: packets that overtake each other (CAN) ---------------------------------
+
+namespace {
+
+/// A frame on its way through a CAN controller, in its lane (2 * priority,
+/// + 1 for a broadcast: can::lane_of; lower is more urgent).
+struct lane_frame {
+  byte_buffer bytes;
+  uint8_t lane;
+};
+
+/// The order in which one sender's frames leave its CAN controller. The
+/// transmit queue holds `queue` frames and sends the most urgent lane first,
+/// FIFO within a lane, as the emulated controller does (`later` in
+/// channels/drivers/can.cpp) and a controller whose mailboxes arbitrate by
+/// identifier would. What does not fit waits in the channel's backlog,
+/// which hands frames over in its own order (a started packet finishes
+/// first: tx_backlog.hpp) every `flush_every` frame times (the channel's
+/// retry timer). `first` is written at time 0, `second` after `written_at`
+/// frame times, straight into the queue if the backlog is empty.
+std::vector<lane_frame> controller_order(const std::vector<lane_frame>& first,
+                                         const std::vector<lane_frame>& second,
+                                         size_t queue, size_t flush_every,
+                                         size_t written_at) {
+  std::vector<lane_frame> backlog{first};
+  std::vector<lane_frame> queued;
+  std::vector<lane_frame> bus;
+  auto hand_over = [&] {
+    while (!backlog.empty() && queued.size() < queue) {
+      queued.push_back(backlog.front());
+      backlog.erase(backlog.begin());
+    }
+  };
+  hand_over();
+  for (size_t t = 0; bus.size() < first.size() + second.size(); ++t) {
+    if (t == written_at) {
+      bool direct = backlog.empty();
+      backlog.insert(backlog.end(), second.begin(), second.end());
+      if (direct)
+        hand_over();
+    }
+    if (t % flush_every == 0)
+      hand_over();
+    if (queued.empty())
+      continue;
+    auto next = std::min_element(queued.begin(), queued.end(),
+                                 [](auto& x, auto& y) { return x.lane < y.lane; });
+    bus.push_back(*next);
+    queued.erase(next);
+  }
+  return bus;
+}
+
+struct overtaking_case {
+  const char* name;
+  size_t first_size;
+  uint8_t first_lane;
+  size_t second_size;
+  uint8_t second_lane;
+  size_t queue;
+  size_t flush_every;
+  size_t written_at;
+  /// Did the first and second packet arrive at a receiver that kept one
+  /// reassembly per sender, before lanes (both packets have tag 0)?
+  bool first_in_one_lane;
+  bool second_in_one_lane;
+};
+
+// Lanes as can::lane_of gives them: control 0, bulk 6, bulk broadcast 7.
+// Sizes as in overload_test: bulk packets of 256 bytes (38 frames at MTU
+// 8), control packets of 24 (5 frames). Queue 64 and a flush every 16
+// frame times are the emulated controller's and the channel's defaults.
+const overtaking_case overtaking_cases[] = {
+  {"control written into the queue overtakes the rest of a bulk packet",
+   256, 6, 24, 0, 64, 16, 10, false, true},
+  {"control's last frames wait in the backlog while bulk frames queued "
+   "before them go out",
+   256, 6, 24, 0, 8, 16, 3, false, false},
+  {"control's first frame overtakes the bulk packet's first frame",
+   100, 6, 40, 0, 16, 16, 0, true, false},
+  {"control split around a few bulk frames by a short queue",
+   60, 6, 24, 0, 8, 2, 3, false, false},
+  {"a unicast overtakes a broadcast of its priority (controller arbitrating "
+   "by identifier)",
+   256, 7, 24, 6, 64, 16, 10, false, true},
+  {"control written after the bulk packet left: no overtaking", 256, 6, 24,
+   0, 64, 16, 40, true, true},
+};
+
+} // namespace
+
+TEST(reassembly_lanes, a_packet_overtaking_another_with_the_same_tag_loses_neither) {
+  for (auto& c : overtaking_cases) {
+    SCOPED_TRACE(c.name);
+    // One sender, one tag sequence per lane: the first packet of each lane
+    // has tag 0, so the two packets collide unless lanes tell them apart.
+    fragmenter tx{8};
+    auto first = pattern(c.first_size, 1);
+    auto second = pattern(c.second_size, 2);
+    std::vector<lane_frame> first_frames;
+    std::vector<lane_frame> second_frames;
+    tx.split(2, c.first_lane, first.data(), first.size(),
+             [&](const uint8_t* d, size_t n) {
+               first_frames.push_back({byte_buffer(d, d + n), c.first_lane});
+             });
+    tx.split(2, c.second_lane, second.data(), second.size(),
+             [&](const uint8_t* d, size_t n) {
+               second_frames.push_back({byte_buffer(d, d + n), c.second_lane});
+             });
+    ASSERT_EQ(first_frames[0].bytes[0] & 0x30, 0);
+    ASSERT_EQ(second_frames[0].bytes[0] & 0x30, 0);
+    auto bus = controller_order(first_frames, second_frames, c.queue,
+                                c.flush_every, c.written_at);
+    auto arrived = [&](bool by_lane) {
+      reassembler r;
+      std::pair<bool, bool> got{false, false};
+      for (auto& f : bus) {
+        byte_buffer out;
+        auto lane = by_lane ? f.lane : uint8_t{0};
+        if (r.push(5, lane, f.bytes.data(), f.bytes.size(), t0, out)
+            == result::complete) {
+          EXPECT_TRUE(out == first || out == second) << "never corrupted";
+          got.first = got.first || out == first;
+          got.second = got.second || out == second;
+        }
+      }
+      if (by_lane) {
+        EXPECT_EQ(drops(r.stats()), 0u);
+        EXPECT_EQ(r.pending(), 0u);
+        EXPECT_EQ(r.memory_in_use(), 0u);
+      } else if (!got.first || !got.second) {
+        EXPECT_GT(r.stats().superseded, 0u);
+      }
+      return got;
+    };
+    // Before: one reassembly per sender; this interleaving lost packets.
+    EXPECT_EQ(arrived(false),
+              std::pair(c.first_in_one_lane, c.second_in_one_lane));
+    // Now: one per (sender, lane); both arrive, nothing is dropped.
+    EXPECT_EQ(arrived(true), std::pair(true, true));
+  }
+}
+
+TEST(reassembly_lanes, the_fragmenter_keeps_one_tag_sequence_per_destination_and_lane) {
+  fragmenter f{8};
+  struct step {
+    link_addr dst;
+    uint8_t lane;
+    uint8_t tag;
+  };
+  const step steps[] = {{2, 6, 0}, {2, 0, 0}, {2, 6, 1}, {2, 6, 2}, {2, 0, 1},
+                        {3, 6, 0}, {2, 7, 0}, {2, 6, 3}, {2, 6, 0}, {2, 0, 2}};
+  for (size_t k = 0; k < std::size(steps); ++k) {
+    SCOPED_TRACE(k);
+    auto p = pattern(30, static_cast<uint32_t>(k));
+    f.split(steps[k].dst, steps[k].lane, p.data(), p.size(),
+            [&](const uint8_t* d, size_t) {
+              EXPECT_EQ(d[0] >> 4 & 3, steps[k].tag);
+            });
+  }
+}
+
+TEST(reassembly_lanes, packets_of_many_lanes_interleaved_frame_by_frame_all_arrive) {
+  // Every lane of one sender with one packet in flight at once, frames
+  // taken round robin over the lanes: the worst interleaving a controller
+  // could produce. All packets have tag 0 (one sequence per lane).
+  fragmenter tx{8};
+  std::vector<byte_buffer> packets;
+  std::vector<std::vector<byte_buffer>> frames(max_lanes);
+  for (uint8_t lane = 0; lane < max_lanes; ++lane) {
+    packets.push_back(pattern(50 + 7 * lane, lane));
+    tx.split(1, lane, packets.back().data(), packets.back().size(),
+             [&](const uint8_t* d, size_t n) {
+               frames[lane].emplace_back(d, d + n);
+             });
+  }
+  reassembler r;
+  std::vector<byte_buffer> got;
+  for (size_t i = 0;; ++i) {
+    bool any = false;
+    for (uint8_t lane = 0; lane < max_lanes; ++lane) {
+      if (i >= frames[lane].size())
+        continue;
+      any = true;
+      byte_buffer out;
+      if (r.push(9, lane, frames[lane][i].data(), frames[lane][i].size(), t0,
+                 out)
+          == result::complete)
+        got.push_back(out);
+    }
+    if (!any)
+      break;
+  }
+  std::sort(got.begin(), got.end());
+  std::sort(packets.begin(), packets.end());
+  EXPECT_EQ(got, packets);
+  EXPECT_EQ(drops(r.stats()), 0u);
+  EXPECT_EQ(r.memory_in_use(), 0u);
+}
+
+TEST(reassembly_lanes, the_per_sender_bound_covers_all_its_lanes) {
+  // Lanes give a sender no extra memory: its newest packet in one lane
+  // evicts its older packet in another when the two exceed per_sender,
+  // and another sender's packets are left alone.
+  reassembly_limits limits;
+  limits.per_sender = 5000;
+  reassembler r{limits};
+  fragmenter tx{32};
+  auto split_in = [&](link_addr dst, uint8_t lane, const byte_buffer& p) {
+    std::vector<byte_buffer> out;
+    tx.split(dst, lane, p.data(), p.size(), [&](const uint8_t* d, size_t n) {
+      out.emplace_back(d, d + n);
+    });
+    return out;
+  };
+  auto other = split_in(1, 0, pattern(3000, 3));
+  auto old_frames = split_in(2, 6, pattern(3000, 1));
+  auto fresh = pattern(3000, 2);
+  auto new_frames = split_in(2, 0, fresh);
+  byte_buffer out;
+  EXPECT_EQ(r.push(8, 0, other[0].data(), other[0].size(), t0, out),
+            result::pending);
+  EXPECT_EQ(r.push(7, 6, old_frames[0].data(), old_frames[0].size(), t0, out),
+            result::pending);
+  auto before = r.stats();
+  EXPECT_EQ(r.push(7, 0, new_frames[0].data(), new_frames[0].size(), t0, out),
+            result::pending);
+  expect_only(before, r.stats(), &reassembly_stats::over_limit);
+  EXPECT_EQ(r.pending(), 2u) << "sender 8's packet and sender 7's newest";
+  auto res = result::dropped;
+  for (size_t i = 1; i < new_frames.size(); ++i)
+    res = r.push(7, 0, new_frames[i].data(), new_frames[i].size(), t0, out);
+  EXPECT_EQ(res, result::complete);
+  EXPECT_EQ(out, fresh);
 }
 
 // -- bundles (several small packets in one frame) ---------------------------------

@@ -1,24 +1,32 @@
 // Fuzz target: fragmentation and reassembly (channels/fragmentation.hpp,
 // docs/protocol.md "Fragment header"). The input is a script that plays one
 // link: arbitrary frames from up to eight senders, interleaved with the
-// frames of one honest sender (a fragmenter), and the passing of time.
+// frames of one honest sender (a fragmenter) in two lanes, and the passing
+// of time.
 //
 // Script (bytes are read front to back; missing bytes read as 0):
 //   MTU of the honest sender (2 bytes: 8 + x % 1493), then operations:
-//   0  frame:    src/action (1 byte: bits 0..2 the sender, bits 3..7 an
-//                action for the honest sender), length (1 byte; 255: 2 more
-//                bytes), the frame's bytes; then one honest step
-//   1  packet:   the honest sender starts a packet: size (2 bytes,
+//   0  frame:    src/action (1 byte: bits 0..2 the sender, bits 3..6 an
+//                action for the honest sender, bit 7 the frame's lane, 0 or
+//                1), length (1 byte; 255: 2 more bytes), the frame's bytes;
+//                then one honest step
+//   1  packet:   the honest sender starts a packet in a lane: size (2 bytes,
 //                % (max_packet + 1)), content (1 byte: bit 0 set = bytes
-//                from the script, repeated, else pseudo-random bytes)
+//                from the script, repeated, else pseudo-random bytes; bit 7
+//                the lane, 0 or 1). The lane's previous packet is sent out
+//                first; the other lane's may still be under way.
 //   2  time:     milliseconds (2 bytes); expire()
 //   3  steps:    count (1 byte), action (1 byte): that many honest steps
-// An honest step sends the honest sender's next frame; the action may swap
-// it with the one after (reordering within the window) and may repeat a
-// frame at once (duplication). Reordering is used only with pseudo-random
-// content: a payload repeating every 16 frames makes a swapped frame look
-// like a late copy, which the receiver rules (window, late duplicates) drop
-// by design.
+// An honest step sends the next frame of one lane (action bit 3; the other
+// lane when that one has nothing to send); the action may swap it with the
+// lane's one after (reordering within the window) and may repeat a frame
+// at once (duplication). Steps on the two lanes interleave their packets
+// frame by frame, as a CAN controller does when a control frame overtakes
+// bulk frames: the honest sender keeps one tag sequence per lane, so the
+// two packets under way often share a tag. Reordering is used only with
+// pseudo-random content: a payload repeating every 16 frames makes a
+// swapped frame look like a late copy, which the receiver rules (window,
+// late duplicates) drop by design.
 //
 // Properties checked:
 // - push() is total and its result agrees with the counters: complete adds
@@ -28,16 +36,20 @@
 // - memory_in_use() never exceeds limits.total; a delivered packet never
 //   exceeds max_packet;
 // - the honest sender's packets (MTU 8..1500, narrow and wide sequence
-//   numbers) are all delivered, exactly, in order, whatever the other
-//   senders send in between, and whatever swaps and repeats the actions
-//   ask for; each frame but the last is pending, a repeat is a duplicate
-//   (a repeated single frame is delivered again, as documented);
+//   numbers) are all delivered, exactly, in order within their lane,
+//   whatever the other senders send in between, however the two lanes
+//   interleave, and whatever swaps and repeats the actions ask for; each
+//   frame but the last of its packet is pending, a repeat is a duplicate (a
+//   repeated single frame is delivered again, as documented);
 // - the fragmenter emits frames_for() frames, each full but the last;
 // - after expire(now), next_deadline() lies after now; once every timeout
 //   passed, nothing is pending and no memory is in use.
-// When a script frame claims the honest sender's own address, its packets
-// are no longer checked (anything may happen to them then).
+// When a script frame claims the honest sender's own address (in any
+// lane), its packets are no longer checked (anything may happen to them
+// then).
 
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -91,6 +103,7 @@ public:
   void script_frame(fuzz::reader& in) {
     auto b = in.u8();
     auto src = static_cast<link_addr>(b & 0x07);
+    auto lane = static_cast<uint8_t>(b >> 7);
     size_t len = in.u8();
     if (len == 255)
       len = in.u16();
@@ -99,17 +112,19 @@ public:
     std::vector<uint8_t> frame(p, p + len);
     if (src == honest)
       tainted_ = true;
-    push(src, frame.data(), frame.size());
-    honest_step(static_cast<uint8_t>(b >> 3));
+    push(src, lane, frame.data(), frame.size());
+    honest_step(static_cast<uint8_t>(b >> 3 & 0x0F));
   }
 
   void start_packet(fuzz::reader& in) {
-    drain();
     auto size = size_t{in.u16()} % (r_.limits().max_packet + 1);
     auto mode = in.u8();
+    auto lane = static_cast<uint8_t>(mode >> 7);
+    auto& st = lanes_[lane];
+    drain(lane);
     byte_buffer payload(size);
-    random_ = (mode & 1) == 0;
-    if (!random_) {
+    st.random = (mode & 1) == 0;
+    if (!st.random) {
       size_t n = std::min<size_t>(size, 64);
       auto* p = in.take(n);
       for (size_t i = 0; i < size; ++i)
@@ -118,24 +133,24 @@ public:
       for (auto& x : payload)
         x = static_cast<uint8_t>(next_random() >> 56);
     }
-    queue_.clear();
-    frag_.split(payload.data(), payload.size(),
-                [this](const uint8_t* f, size_t n) {
-                  queue_.emplace_back(f, f + n);
+    st.queue.clear();
+    frag_.split(0, lane, payload.data(), payload.size(),
+                [&st](const uint8_t* f, size_t n) {
+                  st.queue.emplace_back(f, f + n);
                 });
     // The fragmenter's own contract.
-    HERM_FUZZ_CHECK(queue_.size() == frag_.frames_for(size));
-    for (size_t i = 0; i < queue_.size(); ++i) {
-      HERM_FUZZ_CHECK(queue_[i].size() <= frag_.mtu());
-      if (queue_.size() > 1 && i + 1 < queue_.size())
-        HERM_FUZZ_CHECK(queue_[i].size() == frag_.mtu());
+    HERM_FUZZ_CHECK(st.queue.size() == frag_.frames_for(size));
+    for (size_t i = 0; i < st.queue.size(); ++i) {
+      HERM_FUZZ_CHECK(st.queue[i].size() <= frag_.mtu());
+      if (st.queue.size() > 1 && i + 1 < st.queue.size())
+        HERM_FUZZ_CHECK(st.queue[i].size() == frag_.mtu());
     }
-    single_ = queue_.size() == 1;
-    expected_ = std::move(payload);
+    st.single = st.queue.size() == 1;
+    st.expected = std::move(payload);
   }
 
   void advance(fuzz::reader& in) {
-    drain();
+    drain_all();
     now_ += std::chrono::milliseconds{in.u16()};
     expire();
   }
@@ -143,12 +158,13 @@ public:
   void steps(fuzz::reader& in) {
     auto n = size_t{in.u8()};
     auto action = in.u8();
-    for (size_t i = 0; i < n && !queue_.empty(); ++i)
+    for (size_t i = 0; i < n && !(lanes_[0].queue.empty() && lanes_[1].queue.empty());
+         ++i)
       honest_step(action);
   }
 
   void finish() {
-    drain();
+    drain_all();
     now_ += r_.limits().timeout + std::chrono::seconds{1};
     expire();
     HERM_FUZZ_CHECK(r_.pending() == 0);
@@ -159,41 +175,55 @@ public:
 private:
   // -- the honest sender -----------------------------------------------------
 
-  /// Sends the next frame; action bit 0: swap it with the one after (random
+  /// One lane of the honest sender: the frames of its packet under way.
+  struct lane_state {
+    std::deque<byte_buffer> queue;
+    byte_buffer expected;
+    bool random = true;
+    bool single = false;
+  };
+
+  /// Sends the next frame of lane `action` bit 3 (of the other lane when
+  /// that one is idle); action bit 0: swap it with the one after (random
   /// content only), bit 1: repeat the first frame sent, bit 2: repeat the
   /// second.
   void honest_step(uint8_t action) {
-    if (queue_.empty())
+    auto lane = static_cast<uint8_t>(action >> 3 & 1);
+    if (lanes_[lane].queue.empty())
+      lane ^= 1;
+    auto& st = lanes_[lane];
+    if (st.queue.empty())
       return;
-    if ((action & 1) != 0 && random_ && queue_.size() >= 2) {
-      std::swap(queue_[0], queue_[1]);
-      send_next(result::pending, (action & 2) != 0);
-      send_next(queue_.size() == 1 ? result::complete : result::pending,
+    if ((action & 1) != 0 && st.random && st.queue.size() >= 2) {
+      std::swap(st.queue[0], st.queue[1]);
+      send_next(lane, result::pending, (action & 2) != 0);
+      send_next(lane, st.queue.size() == 1 ? result::complete : result::pending,
                 (action & 4) != 0);
       return;
     }
-    send_next(queue_.size() == 1 ? result::complete : result::pending,
+    send_next(lane, st.queue.size() == 1 ? result::complete : result::pending,
               (action & 2) != 0);
   }
 
-  void send_next(result want, bool repeat) {
-    auto frame = std::move(queue_.front());
-    queue_.pop_front();
-    auto got = push(honest, frame.data(), frame.size());
+  void send_next(uint8_t lane, result want, bool repeat) {
+    auto& st = lanes_[lane];
+    auto frame = std::move(st.queue.front());
+    st.queue.pop_front();
+    auto got = push(honest, lane, frame.data(), frame.size());
     if (!tainted_) {
       HERM_FUZZ_CHECK(got == want);
       if (want == result::complete)
-        HERM_FUZZ_CHECK(out_ == expected_);
+        HERM_FUZZ_CHECK(out_ == st.expected);
     }
     if (!repeat)
       return;
     auto before = r_.stats();
-    got = push(honest, frame.data(), frame.size());
+    got = push(honest, lane, frame.data(), frame.size());
     if (tainted_)
       return;
-    if (single_) {
+    if (st.single) {
       // Single frames carry no sequence number: delivered again.
-      HERM_FUZZ_CHECK(got == result::complete && out_ == expected_);
+      HERM_FUZZ_CHECK(got == result::complete && out_ == st.expected);
       return;
     }
     HERM_FUZZ_CHECK(got == result::dropped);
@@ -202,10 +232,16 @@ private:
     HERM_FUZZ_CHECK(drops(after) == drops(before) + 1);
   }
 
-  void drain() {
-    while (!queue_.empty())
-      send_next(queue_.size() == 1 ? result::complete : result::pending,
+  void drain(uint8_t lane) {
+    auto& st = lanes_[lane];
+    while (!st.queue.empty())
+      send_next(lane, st.queue.size() == 1 ? result::complete : result::pending,
                 false);
+  }
+
+  void drain_all() {
+    drain(0);
+    drain(1);
   }
 
   uint64_t next_random() {
@@ -218,10 +254,10 @@ private:
 
   // -- the receiver ----------------------------------------------------------
 
-  result push(link_addr src, const uint8_t* data, size_t size) {
+  result push(link_addr src, uint8_t lane, const uint8_t* data, size_t size) {
     auto before = r_.stats();
     out_.assign(3, 0xEE);
-    auto got = r_.push(src, data, size, now_, out_);
+    auto got = r_.push(src, lane, data, size, now_, out_);
     auto& after = r_.stats();
     HERM_FUZZ_CHECK(monotonic(before, after));
     HERM_FUZZ_CHECK(r_.memory_in_use() <= r_.limits().total);
@@ -270,11 +306,8 @@ private:
   reassembler r_;
   // Far from the clock's epoch: deadlines are computed as now + timeout.
   clock_type::time_point now_ = clock_type::time_point{} + std::chrono::hours{1};
-  std::deque<byte_buffer> queue_;
-  byte_buffer expected_;
+  std::array<lane_state, 2> lanes_;
   byte_buffer out_;
-  bool random_ = true;
-  bool single_ = false;
   bool tainted_ = false;
   uint64_t rng_ = 0;
 };
