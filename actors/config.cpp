@@ -335,7 +335,7 @@ public:
   /// appears in errors or logs.
   void auth(const field& f, file_config& cfg) const {
     auto fs = entries(f.value, f.path, f.key_line, "a map",
-                      {"key_file", "key_id", "tag_bytes", "data"});
+                      {"key_file", "key_id", "tag_bytes", "data", "challenge"});
     auto& a = cfg.module.routing.auth;
     a = auth_config{};
     auto& kf = require(fs, "auth.key_file", f.key_line,
@@ -350,6 +350,8 @@ public:
     if (auto* x = find(fs, "auth.data"))
       a.data = choice(*x, {"discovery", "all"}) == "all" ? auth_data::all
                                                           : auth_data::discovery;
+    if (auto* x = find(fs, "auth.challenge"))
+      a.challenge = choice(*x, {"true", "false"}) == "true";
     std::vector<uint8_t> key;
     auto err = read_key(path, key);
     if (!err.empty())

@@ -164,7 +164,11 @@ json to_json(const routing_stats& s) {
           {"rx_replayed", s.rx_replayed},
           {"rx_unsigned", s.rx_unsigned},
           {"rx_auth_table_full", s.rx_auth_table_full},
-          {"tx_signed", s.tx_signed}};
+          {"tx_signed", s.tx_signed},
+          {"rx_auth_challenged", s.rx_auth_challenged},
+          {"rx_challenge_failed", s.rx_challenge_failed},
+          {"tx_challenges", s.tx_challenges},
+          {"tx_challenge_replies", s.tx_challenge_replies}};
 }
 
 json to_json(const app_support_stats& s) {

@@ -1,5 +1,6 @@
 #include "routing/auth.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -11,6 +12,7 @@
 #include <openssl/crypto.h>
 #include <openssl/evp.h>
 #include <openssl/params.h>
+#include <openssl/rand.h>
 
 #include "actors/runtime/error.hpp"
 
@@ -147,6 +149,10 @@ const char* to_string(auth_result x) {
       return "replayed";
     case auth_result::table_full:
       return "table_full";
+    case auth_result::unknown_index:
+      return "unknown_index";
+    case auth_result::challenge_failed:
+      return "challenge_failed";
   }
   return "?";
 }
@@ -164,10 +170,20 @@ struct authenticator::impl {
   }
 };
 
-authenticator::authenticator(auth_config cfg, uint32_t index)
-  : cfg_(std::move(cfg)), index_(index), impl_(std::make_unique<impl>()) {
+authenticator::authenticator(auth_config cfg, uint32_t index,
+                             random_source random)
+  : cfg_(std::move(cfg)),
+    index_(index),
+    random_(std::move(random)),
+    impl_(std::make_unique<impl>()) {
   if (cfg_.tag_bytes != 16)
     cfg_.tag_bytes = 8;
+  if (cfg_.max_senders == 0)
+    cfg_.max_senders = 1;
+  if (!random_)
+    random_ = [](uint8_t* out, size_t n) {
+      return RAND_bytes(out, static_cast<int>(n)) == 1;
+    };
   impl_->mac = EVP_MAC_fetch(nullptr, "HMAC", nullptr);
   if (impl_->mac != nullptr)
     impl_->keyed = EVP_MAC_CTX_new(impl_->mac);
@@ -229,6 +245,16 @@ void authenticator::sign(byte_buffer& packet, uint8_t link) {
 auth_result authenticator::verify(const uint8_t* data, size_t size,
                                   uint8_t link, time_point now,
                                   size_t& body_size, size_t min_body) {
+  auth_trailer t;
+  auto res = verify(data, size, link, now, t, min_body);
+  if (res == auth_result::ok)
+    body_size = t.body_size;
+  return res;
+}
+
+auth_result authenticator::verify(const uint8_t* data, size_t size,
+                                  uint8_t link, time_point now,
+                                  auth_trailer& out, size_t min_body) {
   auto count = [&](auth_result r) {
     switch (r) {
       case auth_result::ok:
@@ -249,6 +275,11 @@ auth_result authenticator::verify(const uint8_t* data, size_t size,
       case auth_result::table_full:
         ++stats_.table_full;
         break;
+      case auth_result::unknown_index:
+        ++stats_.unknown_index;
+        break;
+      case auth_result::challenge_failed:
+        break; // accept_reply's, never verify's
     }
     return r;
   };
@@ -270,26 +301,126 @@ auth_result authenticator::verify(const uint8_t* data, size_t size,
     return count(auth_result::bad_tag);
   if (CRYPTO_memcmp(want.data(), t + auth_head_size, cfg_.tag_bytes) != 0)
     return count(auth_result::bad_tag);
+  out.index = index;
+  out.counter = pc;
+  out.body_size = body;
   // Only packets with a right tag touch the replay table, so a module
   // without the key can neither fill it nor advance a counter.
   auto i = senders_.find(index);
   if (i != senders_.end()) {
     if (pc <= i->second.counter)
       return count(auth_result::replayed);
-  } else if (senders_.size() >= cfg_.max_senders) {
+    i->second.counter = pc;
+    i->second.last = now;
+    return count(auth_result::ok);
+  }
+  // A right tag from an index never heard proves only that someone with
+  // the key signed it once: with the challenge, the sender must show it is
+  // alive before its index counts.
+  if (cfg_.challenge)
+    return count(auth_result::unknown_index);
+  if (!admit(index, pc, now))
+    return count(auth_result::table_full);
+  return count(auth_result::ok);
+}
+
+bool authenticator::admit(uint32_t index, uint64_t counter, time_point now) {
+  auto i = senders_.find(index);
+  if (i == senders_.end() && senders_.size() >= cfg_.max_senders) {
     auto oldest = senders_.end();
     for (auto j = senders_.begin(); j != senders_.end(); ++j)
       if (oldest == senders_.end() || j->second.last < oldest->second.last)
         oldest = j;
     if (oldest == senders_.end() || now - oldest->second.last < cfg_.forget_after)
-      return count(auth_result::table_full);
+      return false;
     senders_.erase(oldest);
   }
   auto& s = senders_[index];
-  s.counter = pc;
+  // Never lowered (accept_reply for an index known meanwhile).
+  s.counter = std::max(s.counter, counter);
   s.last = now;
-  body_size = body;
-  return count(auth_result::ok);
+  return true;
+}
+
+// -- challenges ------------------------------------------------------------------
+
+bool authenticator::challenge(uint32_t index, time_point now,
+                              challenge_nonce& nonce) {
+  auto i = challenges_.find(index);
+  if (i != challenges_.end() && now - i->second.sent < cfg_.challenge_interval) {
+    ++stats_.challenges_limited;
+    return false;
+  }
+  challenge_nonce fresh;
+  if (!random_(fresh.data(), fresh.size())) {
+    ++stats_.challenges_limited;
+    return false;
+  }
+  if (i == challenges_.end() && challenges_.size() >= cfg_.max_senders) {
+    for (auto j = challenges_.begin(); j != challenges_.end();)
+      j = now - j->second.sent > cfg_.challenge_timeout ? challenges_.erase(j)
+                                                        : std::next(j);
+    if (challenges_.size() >= cfg_.max_senders) {
+      auto oldest = challenges_.begin();
+      for (auto j = challenges_.begin(); j != challenges_.end(); ++j)
+        if (j->second.sent < oldest->second.sent)
+          oldest = j;
+      challenges_.erase(oldest);
+    }
+  }
+  auto& p = challenges_[index];
+  p.nonce = fresh;
+  p.sent = now;
+  nonce = fresh;
+  ++stats_.challenges_sent;
+  return true;
+}
+
+auth_result authenticator::accept_reply(const auth_trailer& t,
+                                        const challenge_nonce& nonce,
+                                        time_point now) {
+  auto i = challenges_.find(t.index);
+  if (i == challenges_.end()) {
+    ++stats_.challenges_failed;
+    return auth_result::challenge_failed;
+  }
+  if (now - i->second.sent > cfg_.challenge_timeout) {
+    challenges_.erase(i);
+    ++stats_.challenges_failed;
+    return auth_result::challenge_failed;
+  }
+  if (CRYPTO_memcmp(i->second.nonce.data(), nonce.data(), nonce.size()) != 0) {
+    ++stats_.challenges_failed;
+    return auth_result::challenge_failed;
+  }
+  challenges_.erase(i);
+  if (!admit(t.index, t.counter, now)) {
+    ++stats_.challenges_failed;
+    return auth_result::table_full;
+  }
+  ++stats_.challenges_passed;
+  return auth_result::ok;
+}
+
+bool authenticator::may_reply(uint32_t index, time_point now) {
+  auto i = replied_.find(index);
+  if (i != replied_.end()) {
+    if (now - i->second < cfg_.challenge_interval) {
+      ++stats_.replies_limited;
+      return false;
+    }
+  } else if (replied_.size() >= cfg_.max_senders) {
+    for (auto j = replied_.begin(); j != replied_.end();)
+      j = now - j->second >= cfg_.challenge_interval ? replied_.erase(j)
+                                                     : std::next(j);
+    if (replied_.size() >= cfg_.max_senders) {
+      ++stats_.replies_limited;
+      return false;
+    }
+  }
+  replied_[index] = now;
+  ++stats_.replies;
+  return true;
 }
 
 } // namespace herm

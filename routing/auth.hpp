@@ -13,14 +13,27 @@
 // tag is right and its counter is above the last one it accepted for that
 // index (replay protection); the index table is bounded.
 //
+// An index the receiver does not know is not accepted on the strength of
+// its tag alone (a recording from a sender's previous process start has a
+// right tag): the receiver challenges it (RFC 8967 sections 4.3, Challenge
+// Request and Reply). It sends a fresh random nonce (`challenge`); the
+// sender echoes it in a packet signed with its current index and counter;
+// a reply with the live nonce (`accept_reply`) makes the index known, with
+// the reply's counter. Challenge requests are answered whatever their index
+// and counter (`may_reply` rate-limits that). Every table is bounded by
+// auth_config::max_senders.
+//
 // Pure: no clock (time comes in as an argument) and no I/O but load_key,
-// which reads one file. Not thread-safe: one authenticator per routing
-// agent. Verification never reads out of bounds and never allocates from a
-// length on the wire: the trailer has a fixed size.
+// which reads one file, and nonces, drawn from a caller-supplied random
+// source (default: OpenSSL's RAND_bytes). Not thread-safe: one
+// authenticator per routing agent. Verification never reads out of bounds
+// and never allocates from a length on the wire: the trailer has a fixed
+// size.
 
 #include <array>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -30,6 +43,7 @@
 
 #include "channels/messages.hpp"
 #include "routing/module_id.hpp"
+#include "routing/wire.hpp"
 
 namespace herm {
 
@@ -65,10 +79,23 @@ struct auth_config {
   /// Tag length, bytes: 8 or 16.
   uint8_t tag_bytes = 8;
   auth_data data = auth_data::discovery;
-  /// Senders (indexes) whose counters are remembered at most.
+  /// Senders (indexes) whose counters are remembered at most; also bounds
+  /// the live challenges and the requesters answered (0 counts as 1).
   size_t max_senders = 256;
   /// A sender silent this long may be forgotten when the table is full.
   std::chrono::milliseconds forget_after{60000};
+  /// RFC 8967's challenge: a packet with a right tag from an index not
+  /// known is not accepted (verify says unknown_index) until that sender
+  /// has echoed a nonce. Off: such a packet is accepted and its index
+  /// recorded (a recording from an index never heard is then accepted
+  /// once); a module with the challenge off still answers challenges.
+  bool challenge = true;
+  /// At most one challenge request per unknown index, and one reply per
+  /// requesting index, per this interval (RFC 8967's recommended 300 ms).
+  std::chrono::milliseconds challenge_interval{300};
+  /// A reply counts only if it arrives within this long of its request
+  /// (RFC 8967's 30 s); the challenge is forgotten then.
+  std::chrono::milliseconds challenge_timeout{30000};
 
   bool enabled() const noexcept {
     return !key.empty();
@@ -109,11 +136,19 @@ enum class auth_result : uint8_t {
   replayed,
   /// A new sender index while the table is full of live senders.
   table_full,
+  /// Right tag, but the sender index is not known (challenge on): not
+  /// accepted; the caller challenges the sender.
+  unknown_index,
+  /// A challenge reply that answers no live challenge of its index: none
+  /// was sent, its nonce is another, or it came after challenge_timeout.
+  challenge_failed,
 };
 
 const char* to_string(auth_result x);
 
-/// Counters: every verification is counted once, under its result.
+/// Counters: every verification is counted once, under its result
+/// (accepted .. unknown_index); every challenge, reply and accept_reply
+/// once in the counters below them.
 struct auth_stats {
   uint64_t signed_packets = 0;
   uint64_t accepted = 0;
@@ -122,7 +157,29 @@ struct auth_stats {
   uint64_t bad_tag = 0;
   uint64_t replayed = 0;
   uint64_t table_full = 0;
+  uint64_t unknown_index = 0;
+  /// challenge(): nonces handed out, and calls refused by the rate limit.
+  uint64_t challenges_sent = 0;
+  uint64_t challenges_limited = 0;
+  /// accept_reply(): ok, and anything else (challenge_failed, table_full).
+  uint64_t challenges_passed = 0;
+  uint64_t challenges_failed = 0;
+  /// may_reply(): true, and false.
+  uint64_t replies = 0;
+  uint64_t replies_limited = 0;
 };
+
+/// What a trailer with a right tag says (verify fills it whenever the tag
+/// is right: results ok, replayed, table_full, unknown_index).
+struct auth_trailer {
+  uint32_t index = 0;
+  uint64_t counter = 0;
+  /// The packet's size without the trailer.
+  size_t body_size = 0;
+};
+
+/// Fills `out[0..n)` with random bytes; false when it could not.
+using random_source = std::function<bool(uint8_t* out, size_t n)>;
 
 /// Signs and verifies packets of one module. See the file comment.
 class authenticator {
@@ -130,8 +187,9 @@ public:
   using time_point = std::chrono::steady_clock::time_point;
 
   /// `cfg.key` must not be empty; `index` is this process's sender index
-  /// (random per start; the caller draws it).
-  authenticator(auth_config cfg, uint32_t index);
+  /// (random per start; the caller draws it). Challenge nonces come from
+  /// `random` (tests pass a deterministic one), by default RAND_bytes.
+  authenticator(auth_config cfg, uint32_t index, random_source random = {});
   ~authenticator();
 
   authenticator(const authenticator&) = delete;
@@ -146,6 +204,44 @@ public:
   /// has (its header), so a short packet counts as truncated.
   auth_result verify(const uint8_t* data, size_t size, uint8_t link,
                      time_point now, size_t& body_size, size_t min_body = 1);
+
+  /// As above; fills `out` whenever the tag is right, so that the caller
+  /// can answer a challenge request whatever its index and counter, and
+  /// challenge an unknown index (result unknown_index: nothing recorded).
+  auth_result verify(const uint8_t* data, size_t size, uint8_t link,
+                     time_point now, auth_trailer& out, size_t min_body = 1);
+
+  // -- RFC 8967 challenges --------------------------------------------------------
+
+  /// Starts a challenge of sender `index` (verify said unknown_index):
+  /// draws a fresh nonce into `nonce` and remembers it for
+  /// challenge_timeout. False, and nothing changes, when a challenge of
+  /// `index` started less than challenge_interval ago (the rate limit: a
+  /// recording replayed fast costs one request per interval) or the random
+  /// source failed. A new challenge of the same index replaces the old
+  /// nonce. At most max_senders challenges are remembered; when full, the
+  /// expired ones go, then the oldest.
+  bool challenge(uint32_t index, time_point now, challenge_nonce& nonce);
+
+  /// A challenge reply carrying `nonce`, in a packet whose trailer `t`
+  /// verify found right (unknown_index). ok when it answers the live
+  /// challenge of `t.index` (same nonce, at most challenge_timeout after
+  /// it): the index is known from now on, with `t.counter` as its last
+  /// counter (a counter already recorded is never lowered), and the
+  /// challenge is used up. table_full when the sender
+  /// table is full of live senders; challenge_failed otherwise (a wrong
+  /// nonce leaves the challenge live: the reply to a newer request may
+  /// still come).
+  auth_result accept_reply(const auth_trailer& t, const challenge_nonce& nonce,
+                           time_point now);
+
+  /// Whether to answer a challenge request from sender `index` now, and if
+  /// so records the reply: at most one per challenge_interval per
+  /// requesting index (a replayed request makes this module sign a reply to
+  /// an old nonce, which is harmless but costs a packet). At most
+  /// max_senders requesters are remembered; when all of them were answered
+  /// within challenge_interval, false.
+  bool may_reply(uint32_t index, time_point now);
 
   const auth_stats& stats() const noexcept {
     return stats_;
@@ -169,11 +265,25 @@ public:
     return senders_.size();
   }
 
+  /// Challenges currently remembered (sent, not answered, maybe expired).
+  size_t challenges() const noexcept {
+    return challenges_.size();
+  }
+
 private:
   struct sender {
     uint64_t counter = 0;
     time_point last;
   };
+
+  struct pending {
+    challenge_nonce nonce{};
+    time_point sent;
+  };
+
+  /// Records `counter` as the last of `index`; false when `index` is new
+  /// and the table is full of senders heard within forget_after.
+  bool admit(uint32_t index, uint64_t counter, time_point now);
 
   /// Full HMAC-SHA256 of the pseudo-header and `data[0..size)`; false
   /// (and zeros) when OpenSSL failed.
@@ -184,6 +294,11 @@ private:
   uint32_t index_;
   uint64_t counter_ = 1;
   std::map<uint32_t, sender> senders_;
+  /// Live challenges by the index challenged.
+  std::map<uint32_t, pending> challenges_;
+  /// When a challenge request from an index was last answered.
+  std::map<uint32_t, time_point> replied_;
+  random_source random_;
   auth_stats stats_;
   struct impl;
   std::unique_ptr<impl> impl_;

@@ -121,14 +121,21 @@ void send_all(agent_impl self, const byte_buffer& bytes,
                               outgoing(self, kv.second, bytes, true)});
 }
 
-/// Hellos on every channel; a goodbye (interval 0) when `leaving`.
-void send_hellos(agent_impl self, bool leaving = false) {
+/// Encodes this module's next hello into st.buf; a goodbye (interval 0)
+/// when `leaving`.
+void make_hello(agent_impl self, bool leaving) {
   auto& st = self->state;
   auto interval = std::clamp<int64_t>(st.cfg.hello_interval.count(), 1, 0xFFFF);
   hello h{st.table.self(), st.alloc->instance(), st.hello_seqno++,
           static_cast<uint16_t>(leaving ? 0 : interval)};
   st.buf.clear();
   encode(h, st.buf);
+}
+
+/// Hellos on every channel; a goodbye (interval 0) when `leaving`.
+void send_hellos(agent_impl self, bool leaving = false) {
+  auto& st = self->state;
+  make_hello(self, leaving);
   send_all(self, st.buf);
   st.stats.tx_hellos += st.channels.size();
 }
@@ -623,8 +630,74 @@ void on_conflict(agent_impl self, channel_id ch, const byte_buffer& bytes) {
 
 // -- authentication -------------------------------------------------------------
 
+/// Challenges sender `index`, heard at `src` on channel `ch` with a right
+/// tag but not known: a fresh nonce it must echo, signed. At most one per
+/// index per challenge_interval (the authenticator's rate limit).
+void send_challenge(agent_impl self, channel_id ch, link_addr src,
+                    uint32_t index) {
+  auto& st = self->state;
+  challenge_request req;
+  if (!st.auth->challenge(index, self->clock().now(), req.nonce))
+    return;
+  st.buf.clear();
+  encode(req, st.buf);
+  send_on(self, ch, src, st.buf);
+  ++st.stats.tx_challenges;
+}
+
+/// Answers the challenge request in `pkt` (its body: `t.body_size` bytes)
+/// from sender `t.index`, whatever that index and its counter (RFC 8967
+/// 4.3: the requester may not know us, and we may not know it), at most
+/// once per requesting index per challenge_interval. The reply is followed
+/// by our hello to the requester: the requester knows our index once the
+/// reply is in, so the hello makes us its neighbour at once instead of at
+/// our next hello.
+void answer_challenge(agent_impl self, const packet_received& pkt,
+                      const auth_trailer& t) {
+  auto& st = self->state;
+  auto req = decode_challenge_request(pkt.bytes.data(), t.body_size);
+  if (!req) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  if (!st.auth->may_reply(t.index, self->clock().now()))
+    return;
+  st.buf.clear();
+  encode(challenge_reply{req->nonce}, st.buf);
+  send_on(self, pkt.channel, pkt.src, st.buf);
+  ++st.stats.tx_challenge_replies;
+  if (st.leaving)
+    return;
+  make_hello(self, false);
+  send_on(self, pkt.channel, pkt.src, st.buf);
+  ++st.stats.tx_hellos;
+}
+
+/// A challenge reply from sender `t.index`, not known yet: known from now
+/// on if it echoes the live nonce of our challenge to that index.
+void on_challenge_reply(agent_impl self, const packet_received& pkt,
+                        const auth_trailer& t) {
+  auto& st = self->state;
+  auto rep = decode_challenge_reply(pkt.bytes.data(), t.body_size);
+  if (!rep) {
+    ++st.stats.rx_malformed;
+    return;
+  }
+  switch (st.auth->accept_reply(t, rep->nonce, self->clock().now())) {
+    case auth_result::ok:
+      break;
+    case auth_result::table_full:
+      ++st.stats.rx_auth_table_full;
+      break;
+    default:
+      ++st.stats.rx_challenge_failed;
+      break;
+  }
+}
+
 /// In a keyed network: checks the trailer of a received packet and strips
-/// it. False (and counted) when the packet must be dropped.
+/// it. False (and counted) when the packet must be dropped. Challenge
+/// requests and replies are handled here, and never go further.
 bool authenticate(agent_impl self, packet_received& pkt, packet_type type) {
   auto& st = self->state;
   auto ci = st.channels.find(pkt.channel);
@@ -649,13 +722,33 @@ bool authenticate(agent_impl self, packet_received& pkt, packet_type type) {
     }
     min_body = header_size(*h);
   }
-  size_t body = 0;
+  auth_trailer t;
   auto res = st.auth->verify(b.data(), b.size(),
                              static_cast<uint8_t>(ci->second.code),
-                             self->clock().now(), body, min_body);
+                             self->clock().now(), t, min_body);
+  bool right_tag = res == auth_result::ok || res == auth_result::replayed
+                   || res == auth_result::table_full
+                   || res == auth_result::unknown_index;
+  if (res == auth_result::unknown_index
+      && type != packet_type::challenge_reply) {
+    // Not acted on until its sender has shown that it is alive.
+    ++st.stats.rx_auth_challenged;
+    // Our challenge goes out before our answer to theirs (below): the
+    // sender answers it before it hears our hello, so the full update it
+    // sends on meeting us finds its index known here.
+    send_challenge(self, pkt.channel, pkt.src, t.index);
+  }
+  // A challenge request with a right tag is answered before the index and
+  // counter checks (RFC 8967 4.3): the requester may be new to us.
+  if (right_tag && type == packet_type::challenge_request)
+    answer_challenge(self, pkt, t);
   switch (res) {
     case auth_result::ok:
       break;
+    case auth_result::unknown_index:
+      if (type == packet_type::challenge_reply)
+        on_challenge_reply(self, pkt, t);
+      return false;
     case auth_result::replayed:
       ++st.stats.rx_replayed;
       return false;
@@ -666,7 +759,10 @@ bool authenticate(agent_impl self, packet_received& pkt, packet_type type) {
       ++st.stats.rx_auth_failed;
       return false;
   }
-  b.resize(body);
+  if (type == packet_type::challenge_request
+      || type == packet_type::challenge_reply)
+    return false; // answered above; a reply from a known index: nothing to do
+  b.resize(t.body_size);
   if (type == packet_type::data)
     set_authenticated(b.data(), false);
   return true;
@@ -947,6 +1043,12 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
           break;
         case packet_type::conflict:
           on_conflict(self, pkt.channel, pkt.bytes);
+          break;
+        case packet_type::challenge_request:
+        case packet_type::challenge_reply:
+          // Keyed: handled by authenticate. Without a key: authentication
+          // traffic this module cannot check.
+          ++st.stats.rx_auth_failed;
           break;
       }
     },

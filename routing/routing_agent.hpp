@@ -156,6 +156,17 @@ struct routing_stats {
   uint64_t rx_unsigned = 0;
   uint64_t rx_auth_table_full = 0;
   uint64_t tx_signed = 0;
+  /// RFC 8967's challenge (docs/protocol.md, "Authentication"): packets with
+  /// a right tag from a sender index not known (yet), dropped and answered
+  /// with a challenge (rx_auth_challenged; every neighbour's first packets
+  /// after either side started, and any recording of a sender gone);
+  /// challenge replies that answered no live challenge (rx_challenge_failed:
+  /// a stale or wrong nonce, too late); challenge requests sent
+  /// (tx_challenges) and answered (tx_challenge_replies).
+  uint64_t rx_auth_challenged = 0;
+  uint64_t rx_challenge_failed = 0;
+  uint64_t tx_challenges = 0;
+  uint64_t tx_challenge_replies = 0;
 };
 
 template <class Inspector>
@@ -167,7 +178,9 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.rx_malformed, x.rx_unknown_neighbour, x.rx_refused_routes, x.rx_goodbyes,
            x.tx_hellos, x.tx_updates, x.tx_update_entries, x.tx_claims,
            x.tx_conflicts, x.tx_seqno_requests, x.rx_auth_failed,
-           x.rx_replayed, x.rx_unsigned, x.rx_auth_table_full, x.tx_signed);
+           x.rx_replayed, x.rx_unsigned, x.rx_auth_table_full, x.tx_signed,
+           x.rx_auth_challenged, x.rx_challenge_failed, x.tx_challenges,
+           x.tx_challenge_replies);
 }
 
 /// Receives this module's data packets of one protocol (the application
@@ -261,7 +274,11 @@ struct routing_config {
   uint64_t seed = 0;
   /// Pre-shared key authentication (routing/auth.hpp); no key: none. With a
   /// key every control packet sent carries a trailer and every one received
-  /// must carry a valid one; data packets as `auth.data` says.
+  /// must carry a valid one; data packets as `auth.data` says. A neighbour's
+  /// packets count only once it has answered a challenge (`auth.challenge`,
+  /// on by default): the agent challenges unknown sender indexes on the
+  /// link they came from, answers challenges (followed by its hello, so
+  /// that the challenger has a neighbour one round trip after it asked).
   auth_config auth;
   /// Test hook: called for every data packet this module handles (delivered
   /// or forwarded), with the module's id; used by packet-path checkers.

@@ -18,6 +18,7 @@ constexpr size_t hello_size = 15;          // byte0, sender, instance, seqno, in
 constexpr size_t seqno_request_size = 8;   // byte0, sender, origin, seqno, hop_count
 constexpr size_t claim_size = 20;          // byte0, id, nonce, instance, hop_limit
 constexpr size_t conflict_size = 28;       // byte0, id, holder, nonce, loser, hop_limit
+constexpr size_t challenge_size = 1 + challenge_nonce_size; // byte0, nonce
 constexpr size_t update_head_size = 12;    // byte0, sender, instance, count
 constexpr size_t entry_head_size = 4;      // origin, seqno
 constexpr size_t class_metric_size = 4;    // metric
@@ -51,12 +52,16 @@ const char* name_of(packet_type t) {
       return "claim";
     case packet_type::conflict:
       return "conflict";
+    case packet_type::challenge_request:
+      return "challenge_request";
+    case packet_type::challenge_reply:
+      return "challenge_reply";
   }
   return "?";
 }
 
 constexpr bool known_type(uint8_t t) {
-  return t <= static_cast<uint8_t>(packet_type::conflict);
+  return t <= static_cast<uint8_t>(packet_type::challenge_reply);
 }
 
 std::string num(size_t x) {
@@ -124,6 +129,11 @@ struct writer {
     for (int i = 0; i < 8; ++i)
       out.push_back(static_cast<uint8_t>(x >> (8 * i)));
   }
+
+  template <size_t N>
+  void raw(const std::array<uint8_t, N>& x) {
+    out.insert(out.end(), x.begin(), x.end());
+  }
 };
 
 /// Reads little-endian integers. Callers check `left()` before reading; the
@@ -165,6 +175,13 @@ struct reader {
       x |= uint64_t{data[pos + i]} << (8 * i);
     pos += 8;
     return x;
+  }
+
+  template <size_t N>
+  void raw(std::array<uint8_t, N>& x) {
+    assert(left() >= N);
+    std::copy(data + pos, data + pos + N, x.begin());
+    pos += N;
   }
 };
 
@@ -453,6 +470,53 @@ caf::expected<conflict> decode_conflict(const uint8_t* data, size_t size) {
   x.loser_instance = r.u64();
   x.hop_limit = r.u8();
   return x;
+}
+
+// -- challenges ------------------------------------------------------------------
+
+namespace {
+
+/// Both challenge packets are the first byte and a nonce.
+template <class T>
+void encode_challenge(packet_type t, const T& x, byte_buffer& out) {
+  writer w{out};
+  w.u8(first_byte(t));
+  w.raw(x.nonce);
+}
+
+template <class T>
+caf::expected<T> decode_challenge(packet_type t, const uint8_t* data,
+                                  size_t size) {
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (auto err = check_exact(t, size, challenge_size))
+    return err;
+  reader r{data, size, 1};
+  T x;
+  r.raw(x.nonce);
+  return x;
+}
+
+} // namespace
+
+void encode(const challenge_request& x, byte_buffer& out) {
+  encode_challenge(packet_type::challenge_request, x, out);
+}
+
+caf::expected<challenge_request> decode_challenge_request(const uint8_t* data,
+                                                          size_t size) {
+  return decode_challenge<challenge_request>(packet_type::challenge_request,
+                                             data, size);
+}
+
+void encode(const challenge_reply& x, byte_buffer& out) {
+  encode_challenge(packet_type::challenge_reply, x, out);
+}
+
+caf::expected<challenge_reply> decode_challenge_reply(const uint8_t* data,
+                                                      size_t size) {
+  return decode_challenge<challenge_reply>(packet_type::challenge_reply, data,
+                                           size);
 }
 
 } // namespace herm

@@ -8,6 +8,7 @@
 // anything is allocated, and nothing is read out of bounds. They will be
 // fuzzed.
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -28,6 +29,9 @@ enum class packet_type : uint8_t {
   seqno_request = 3,
   claim = 4,
   conflict = 5,
+  /// RFC 8967's challenge (routing/auth.hpp): keyed networks only.
+  challenge_request = 6,
+  challenge_reply = 7,
 };
 
 /// Reads the first byte. Errors: empty packet, unknown version or type
@@ -148,5 +152,34 @@ struct conflict {
 
 void encode(const conflict& x, byte_buffer& out);
 caf::expected<conflict> decode_conflict(const uint8_t* data, size_t size);
+
+// -- authentication (link-local, keyed networks only) -----------------------------
+
+/// Bytes of a challenge nonce: it proves freshness, not secrecy, so 64
+/// random bits suffice (docs/protocol.md, "Authentication").
+constexpr size_t challenge_nonce_size = 8;
+
+using challenge_nonce = std::array<uint8_t, challenge_nonce_size>;
+
+/// "Prove that you are alive: sign this nonce" (RFC 8967 Challenge
+/// Request). Sent, signed, to the link address of a packet whose tag was
+/// right but whose sender index this module does not know.
+struct challenge_request {
+  challenge_nonce nonce{};
+};
+
+void encode(const challenge_request& x, byte_buffer& out);
+caf::expected<challenge_request> decode_challenge_request(const uint8_t* data,
+                                                          size_t size);
+
+/// The answer: the request's nonce, echoed in a packet signed with the
+/// responder's current index and counter (RFC 8967 Challenge Reply).
+struct challenge_reply {
+  challenge_nonce nonce{};
+};
+
+void encode(const challenge_reply& x, byte_buffer& out);
+caf::expected<challenge_reply> decode_challenge_reply(const uint8_t* data,
+                                                      size_t size);
 
 } // namespace herm

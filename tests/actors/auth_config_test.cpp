@@ -81,17 +81,20 @@ TEST_F(auth_config_file, the_key_is_read_from_the_key_file_with_defaults) {
   EXPECT_EQ(a.tag_bytes, 8);
   EXPECT_EQ(a.key_id, 1);
   EXPECT_EQ(a.data, auth_data::discovery);
+  EXPECT_TRUE(a.challenge);
 }
 
 TEST_F(auth_config_file, every_field_is_read) {
   auto cfg = parse_config(doc("auth:\n  key_file: " + key
-                              + "\n  key_id: 7\n  tag_bytes: 16\n  data: all\n"),
+                              + "\n  key_id: 7\n  tag_bytes: 16\n  data: all\n"
+                              + "  challenge: false\n"),
                           "robot.yaml");
   ASSERT_TRUE(cfg) << render(cfg.error());
   auto& a = cfg->module.routing.auth;
   EXPECT_EQ(a.tag_bytes, 16);
   EXPECT_EQ(a.key_id, 7);
   EXPECT_EQ(a.data, auth_data::all);
+  EXPECT_FALSE(a.challenge);
 }
 
 TEST_F(auth_config_file, mistakes_name_the_file_line_and_field) {
@@ -108,6 +111,8 @@ TEST_F(auth_config_file, mistakes_name_the_file_line_and_field) {
      "robot.yaml:6: auth.tag_bytes: expected 8 or 16, got '12'"},
     {"auth:\n  key_file: " + key + "\n  data: some\n",
      "robot.yaml:6: auth.data: expected discovery or all, got 'some'"},
+    {"auth:\n  key_file: " + key + "\n  challenge: maybe\n",
+     "robot.yaml:6: auth.challenge: expected true or false, got 'maybe'"},
     {"auth:\n  key_file: " + key + "\n  key: " + secret + "\n",
      "robot.yaml:6: auth.key: unknown key"},
     {"auth:\n  key_file: " + loose + "\n",

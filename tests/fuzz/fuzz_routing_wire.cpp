@@ -11,8 +11,9 @@
 //   update entries, hop counts, path lengths, link codes);
 // - set_hop_limit changes the hop limit of a data packet and nothing else;
 //   set_authenticated changes flag bit 5 and nothing else;
-// - a keyed receiver never accepts the input as authenticated (it was not
-//   signed with the key), whatever its trailer says, and never crashes.
+// - a keyed receiver never finds the input's tag right (it was not signed
+//   with the key), whatever its trailer says: not accepted, not even
+//   challenged; and it never crashes.
 
 #include <cstddef>
 #include <cstdint>
@@ -100,9 +101,11 @@ void check_auth(const uint8_t* data, size_t size) {
     return c;
   }();
   authenticator rx{cfg, 1};
-  size_t body = 0;
-  auto res = rx.verify(data, size, 4, authenticator::time_point{}, body);
-  HERM_FUZZ_CHECK(res != auth_result::ok);
+  auth_trailer t;
+  auto res = rx.verify(data, size, 4, authenticator::time_point{}, t);
+  HERM_FUZZ_CHECK(res != auth_result::ok && res != auth_result::unknown_index
+                  && res != auth_result::replayed);
+  HERM_FUZZ_CHECK(t.body_size == 0);
 }
 
 } // namespace
@@ -138,6 +141,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                          [](const claim&) {});
   decoded += try_decoder(data, size, packet_type::conflict, peeked,
                          decode_conflict, [](const conflict&) {});
+  decoded += try_decoder(data, size, packet_type::challenge_request, peeked,
+                         decode_challenge_request,
+                         [](const challenge_request&) {});
+  decoded += try_decoder(data, size, packet_type::challenge_reply, peeked,
+                         decode_challenge_reply, [](const challenge_reply&) {});
   HERM_FUZZ_CHECK(decoded <= 1);
   return 0;
 }

@@ -42,6 +42,13 @@ def routing_wire():
     write(t, "data-auth", h("10 4E 00 42 10 11 2E 01 DE AD BE EF"))
     write(t, "hello-trailer", h("""11 4E 00 01 02 03 04 05 06 07 08 CD AB E8 03
         01 04 03 02 01 01 00 00 00 00 00 00 00 11 22 33 44 55 66 77 88"""))
+    # RFC 8967's challenge (docs/protocol.md, "Authentication"): request
+    # and reply with nonce 01..08, and a request with a trailer (index
+    # 0x0A0B0C0D, counter 7, a tag that no key makes).
+    write(t, "challenge-request", h("16 01 02 03 04 05 06 07 08"))
+    write(t, "challenge-reply", h("17 01 02 03 04 05 06 07 08"))
+    write(t, "challenge-request-trailer", h("""16 01 02 03 04 05 06 07 08
+        01 0D 0C 0B 0A 07 00 00 00 00 00 00 00 11 22 33 44 55 66 77 88"""))
 
 
 def auth():
@@ -55,6 +62,9 @@ def auth():
     write(t, "data-append", bytes([0x0A, 1, 0, 0, 3, 7])
           + h("10 4E 00 42 10 11 0E 01 DE AD BE EF"))
     write(t, "empty-body", bytes([0x08, 2, 0, 0, 1, 0, 9, 0, 0, 1]))
+    # A challenge request; one mutation alters the reply's nonce (byte 3).
+    write(t, "challenge-request", bytes([0x0C, 1, 3, 0, 1, 0x40])
+          + h("16 01 02 03 04 05 06 07 08"))
 
 
 def asl_wire():
@@ -168,6 +178,15 @@ def fragmentation():
     write(t, "honest-wide", mtu64 + bytes([1, 0x00, 0x04, 0, 3, 80, 0x03]))
     write(t, "honest-content", mtu8 + bytes([1, 100, 0, 1]) + bytes(range(1, 17))
           + bytes([3, 100, 0x02]))
+    # Two lanes of the honest sender, both packets with tag 0: a bulk packet
+    # of 256 bytes in lane 0, a control packet of 24 bytes in lane 1 whose
+    # frames overtake it, first all at once, then split around bulk frames
+    # (the CAN controller's order, docs/reliability.md "Overload").
+    write(t, "honest-two-lanes", mtu8 + bytes([1, 0x00, 0x01, 0x00, 1, 24, 0, 0x80,
+                                               3, 10, 0x00, 3, 5, 0x08,
+                                               1, 24, 0, 0x80,
+                                               3, 2, 0x08, 3, 6, 0x00, 3, 3, 0x08,
+                                               3, 40, 0x00]))
     # Regression: the first fuzz finding (fixed in 5e0fb4b): any fragmented
     # packet made the fragmenter compute crc + (offset - size) out of range.
     write(t, "regression-crc-pointer", h("38 00 01 50"))

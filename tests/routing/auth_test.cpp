@@ -1,7 +1,8 @@
 // The authentication core (routing/auth.hpp): signing and verifying with
-// truncated HMAC-SHA256, replay protection by per-sender counters, the
-// bounded sender table, key files and their permissions, and the data
-// header's authenticated flag.
+// truncated HMAC-SHA256, replay protection by per-sender counters, RFC
+// 8967's challenge of unknown sender indexes (nonces, replies, timeouts,
+// rate limits), the bounded tables, key files and their permissions, and
+// the data header's authenticated flag.
 
 #include <fstream>
 #include <string>
@@ -47,6 +48,52 @@ byte_buffer hello_packet() {
 
 const uint8_t eth = static_cast<uint8_t>(link_code::ethernet);
 
+/// Nonces start + 1, start + 2, ... (little endian): deterministic
+/// challenges.
+random_source counting_nonces(uint64_t start = 0) {
+  auto next = std::make_shared<uint64_t>(start);
+  return [next](uint8_t* out, size_t n) {
+    ++*next;
+    for (size_t i = 0; i < n; ++i)
+      out[i] = static_cast<uint8_t>(i < 8 ? *next >> (8 * i) : 0);
+    return true;
+  };
+}
+
+/// `tx`'s signed reply to `nonce`.
+byte_buffer reply_from(authenticator& tx, const challenge_nonce& nonce,
+                       uint8_t link = eth) {
+  byte_buffer p;
+  encode(challenge_reply{nonce}, p);
+  tx.sign(p, link);
+  return p;
+}
+
+/// What `rx` makes of a reply from `tx` to `nonce` at `now`: the tag is
+/// right and the index not known yet, then accept_reply decides.
+auth_result deliver_reply(authenticator& tx, authenticator& rx,
+                          const challenge_nonce& nonce, time_point now) {
+  auto p = reply_from(tx, nonce);
+  auth_trailer t;
+  auto res = rx.verify(p.data(), p.size(), eth, now, t);
+  if (res != auth_result::unknown_index)
+    return res;
+  EXPECT_EQ(t.index, tx.index());
+  EXPECT_EQ(t.body_size, 9u);
+  auto d = decode_challenge_reply(p.data(), t.body_size);
+  EXPECT_TRUE(d);
+  return rx.accept_reply(t, d ? d->nonce : challenge_nonce{}, now);
+}
+
+/// Makes `rx` know `tx`'s index the way the network does: `rx` challenges,
+/// `tx` answers with a signed reply, `rx` accepts it. Uses one of `tx`'s
+/// counter values.
+void introduce(authenticator& tx, authenticator& rx, time_point now = t0) {
+  challenge_nonce n;
+  ASSERT_TRUE(rx.challenge(tx.index(), now, n));
+  ASSERT_EQ(deliver_reply(tx, rx, n, now), auth_result::ok);
+}
+
 } // namespace
 
 // -- signing and verifying ----------------------------------------------------------
@@ -65,12 +112,16 @@ TEST(auth, a_signed_packet_verifies_and_the_trailer_is_stripped) {
     EXPECT_EQ(p[body + 1], 0xD4);
     EXPECT_EQ(p[body + 4], 0xA1);
     EXPECT_EQ(p[body + 5], 1);
+    // Once rx knows the index (counter 2, the reply), counter 3 verifies.
+    introduce(tx, rx);
+    auto q = hello_packet();
+    tx.sign(q, eth);
     size_t got = 0;
-    EXPECT_EQ(rx.verify(p.data(), p.size(), eth, t0, got), auth_result::ok);
+    EXPECT_EQ(rx.verify(q.data(), q.size(), eth, t0, got), auth_result::ok);
     EXPECT_EQ(got, body);
     EXPECT_EQ(rx.stats().accepted, 1u);
-    EXPECT_EQ(tx.stats().signed_packets, 1u);
-    EXPECT_EQ(tx.counter(), 2u);
+    EXPECT_EQ(tx.stats().signed_packets, 3u);
+    EXPECT_EQ(tx.counter(), 4u);
   }
 }
 
@@ -94,9 +145,12 @@ TEST(auth, one_flipped_bit_anywhere_is_refused) {
       }
     EXPECT_EQ(rx.stats().accepted, 0u);
     EXPECT_EQ(rx.senders(), 0u);
-    // The unchanged packet still verifies: refusals left no state.
+    EXPECT_EQ(rx.challenges(), 0u);
+    // The unchanged packet's tag is still right (its index unknown):
+    // refusals left no state.
     size_t got = 0;
-    EXPECT_EQ(rx.verify(p.data(), p.size(), eth, t0, got), auth_result::ok);
+    EXPECT_EQ(rx.verify(p.data(), p.size(), eth, t0, got),
+              auth_result::unknown_index);
   }
 }
 
@@ -115,8 +169,12 @@ TEST(auth, refusals_are_table_driven_and_counted) {
   };
   auto other_key_id = config();
   other_key_id.key_id = 2;
+  auto no_challenge = config();
+  no_challenge.challenge = false;
   std::vector<row> rows{
-    {"good", signed_hello, config(), eth, auth_result::ok},
+    // A right tag from an index never heard: challenged, not accepted.
+    {"good", signed_hello, config(), eth, auth_result::unknown_index},
+    {"good, challenge off", signed_hello, no_challenge, eth, auth_result::ok},
     {"wrong key", signed_hello, config(99), eth, auth_result::bad_tag},
     {"other key id", signed_hello, other_key_id, eth,
      auth_result::wrong_key_id},
@@ -162,7 +220,7 @@ TEST(auth, refusals_are_table_driven_and_counted) {
     EXPECT_EQ(res, r.expected) << to_string(res);
     auto& s = rx.stats();
     EXPECT_EQ(s.accepted + s.truncated + s.wrong_key_id + s.bad_tag
-                + s.replayed + s.table_full,
+                + s.replayed + s.table_full + s.unknown_index,
               1u);
   }
 }
@@ -189,6 +247,7 @@ TEST(auth, every_truncation_of_a_signed_packet_is_refused) {
 TEST(auth, a_replayed_packet_is_refused) {
   authenticator tx{config(), 5};
   authenticator rx{config(), 6};
+  introduce(tx, rx);
   auto p = hello_packet();
   tx.sign(p, eth);
   size_t got = 0;
@@ -201,6 +260,7 @@ TEST(auth, a_replayed_packet_is_refused) {
 TEST(auth, a_counter_going_backwards_is_refused_but_gaps_are_fine) {
   authenticator tx{config(), 5};
   authenticator rx{config(), 6};
+  introduce(tx, rx);
   std::vector<byte_buffer> ps(4, hello_packet());
   for (auto& p : ps)
     tx.sign(p, eth);
@@ -214,48 +274,74 @@ TEST(auth, a_counter_going_backwards_is_refused_but_gaps_are_fine) {
             auth_result::replayed);
 }
 
-TEST(auth, a_restarted_sender_with_a_new_index_is_a_new_sender) {
+TEST(auth, a_restarted_sender_with_a_new_index_is_accepted_after_its_challenge) {
   authenticator rx{config(), 6};
   authenticator before{config(), 100};
+  introduce(before, rx);
   auto p = hello_packet();
   before.sign(p, eth);
-  before.sign(p = hello_packet(), eth);
   size_t got = 0;
   EXPECT_EQ(rx.verify(p.data(), p.size(), eth, t0, got), auth_result::ok);
-  // Same counter (2) after a restart, other index: accepted.
+  // After a restart: another index, the counter from 1 again. Its first
+  // packet is challenged (a recording would look the same), its reply
+  // makes it known, and what it signs next is accepted.
   authenticator after{config(), 200};
   auto q = hello_packet();
   after.sign(q, eth);
-  after.sign(q = hello_packet(), eth);
-  EXPECT_EQ(rx.verify(q.data(), q.size(), eth, t0, got), auth_result::ok);
+  auth_trailer t;
+  EXPECT_EQ(rx.verify(q.data(), q.size(), eth, t0 + 1s, t),
+            auth_result::unknown_index);
+  EXPECT_EQ(t.index, 200u);
+  EXPECT_EQ(t.counter, 1u);
+  EXPECT_EQ(t.body_size, hello_packet().size());
+  introduce(after, rx, t0 + 1s);
   EXPECT_EQ(rx.senders(), 2u);
+  // The packet that prompted the challenge stays refused: its counter (1)
+  // is below the reply's (2).
+  EXPECT_EQ(rx.verify(q.data(), q.size(), eth, t0 + 1s, got),
+            auth_result::replayed);
+  auto r = hello_packet();
+  after.sign(r, eth);
+  EXPECT_EQ(rx.verify(r.data(), r.size(), eth, t0 + 1s, got), auth_result::ok);
 }
 
 TEST(auth, the_sender_table_is_bounded_and_forgets_only_silent_senders) {
-  auto cfg = config();
-  cfg.max_senders = 2;
-  cfg.forget_after = 10s;
-  authenticator rx{cfg, 6};
-  auto signed_by = [](uint32_t index) {
-    authenticator tx{config(), index};
-    auto p = hello_packet();
-    tx.sign(p, eth);
-    return p;
-  };
-  size_t got = 0;
-  auto a = signed_by(1), b = signed_by(2), c = signed_by(3);
-  EXPECT_EQ(rx.verify(a.data(), a.size(), eth, t0, got), auth_result::ok);
-  EXPECT_EQ(rx.verify(b.data(), b.size(), eth, t0 + 5s, got), auth_result::ok);
-  EXPECT_EQ(rx.verify(c.data(), c.size(), eth, t0 + 9s, got),
-            auth_result::table_full);
-  EXPECT_EQ(rx.stats().table_full, 1u);
-  EXPECT_EQ(rx.senders(), 2u);
-  // Sender 1 has been silent for 10 s: it makes room (the oldest goes).
-  EXPECT_EQ(rx.verify(c.data(), c.size(), eth, t0 + 10s, got), auth_result::ok);
-  EXPECT_EQ(rx.senders(), 2u);
-  // Sender 2 is still known: its packet is a replay, not a new sender.
-  EXPECT_EQ(rx.verify(b.data(), b.size(), eth, t0 + 10s, got),
-            auth_result::replayed);
+  // The table fills on accepted challenges (and, with the challenge off,
+  // on first packets): the same bound either way.
+  for (bool challenge : {true, false}) {
+    SCOPED_TRACE(challenge ? "challenge" : "challenge off");
+    auto cfg = config();
+    cfg.max_senders = 2;
+    cfg.forget_after = 10s;
+    cfg.challenge = challenge;
+    authenticator rx{cfg, 6};
+    authenticator s1{config(), 1}, s2{config(), 2}, s3{config(), 3};
+    auto meet = [&](authenticator& tx, time_point now) {
+      if (!challenge) {
+        auto p = hello_packet();
+        tx.sign(p, eth);
+        size_t got = 0;
+        return rx.verify(p.data(), p.size(), eth, now, got);
+      }
+      challenge_nonce n;
+      EXPECT_TRUE(rx.challenge(tx.index(), now, n));
+      return deliver_reply(tx, rx, n, now);
+    };
+    EXPECT_EQ(meet(s1, t0), auth_result::ok);
+    EXPECT_EQ(meet(s2, t0 + 5s), auth_result::ok);
+    EXPECT_EQ(meet(s3, t0 + 9s), auth_result::table_full);
+    EXPECT_EQ(rx.senders(), 2u);
+    // Sender 1 has been silent for 10 s: it makes room (the oldest goes).
+    EXPECT_EQ(meet(s3, t0 + 10s), auth_result::ok);
+    EXPECT_EQ(rx.senders(), 2u);
+    // Sender 2 is still known: a packet it signed long ago is a replay.
+    authenticator s2_again{config(), 2};
+    auto old = hello_packet();
+    s2_again.sign(old, eth);
+    size_t got = 0;
+    EXPECT_EQ(rx.verify(old.data(), old.size(), eth, t0 + 10s, got),
+              auth_result::replayed);
+  }
 }
 
 TEST(auth, a_packet_without_the_key_never_enters_the_sender_table) {
@@ -268,8 +354,242 @@ TEST(auth, a_packet_without_the_key_never_enters_the_sender_table) {
     forger.sign(p, eth);
     size_t got = 0;
     EXPECT_EQ(rx.verify(p.data(), p.size(), eth, t0, got), auth_result::bad_tag);
+    // Nor can its reply to a challenge make an index known.
+    challenge_nonce n;
+    ASSERT_TRUE(rx.challenge(i, t0 + std::chrono::seconds(i), n));
+    EXPECT_EQ(deliver_reply(forger, rx, n, t0 + std::chrono::seconds(i)),
+              auth_result::bad_tag);
   }
   EXPECT_EQ(rx.senders(), 0u);
+  EXPECT_EQ(rx.stats().challenges_passed, 0u);
+}
+
+// -- RFC 8967 challenges ------------------------------------------------------------
+
+TEST(auth, a_new_index_is_not_accepted_until_it_echoes_a_fresh_nonce) {
+  authenticator tx{config(), 0x77};
+  authenticator rx{config(), 6, counting_nonces()};
+  auto p = hello_packet();
+  tx.sign(p, eth);
+  auth_trailer t;
+  ASSERT_EQ(rx.verify(p.data(), p.size(), eth, t0, t), auth_result::unknown_index);
+  EXPECT_EQ(t.index, 0x77u);
+  EXPECT_EQ(rx.senders(), 0u);
+  // Again: still not accepted, however often (a recording replayed).
+  ASSERT_EQ(rx.verify(p.data(), p.size(), eth, t0, t), auth_result::unknown_index);
+  challenge_nonce n;
+  ASSERT_TRUE(rx.challenge(t.index, t0, n));
+  EXPECT_EQ(n, (challenge_nonce{1, 0, 0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(rx.challenges(), 1u);
+  EXPECT_EQ(deliver_reply(tx, rx, n, t0 + 10ms), auth_result::ok);
+  EXPECT_EQ(rx.challenges(), 0u);
+  EXPECT_EQ(rx.senders(), 1u);
+  auto q = hello_packet();
+  tx.sign(q, eth);
+  size_t got = 0;
+  EXPECT_EQ(rx.verify(q.data(), q.size(), eth, t0 + 20ms, got), auth_result::ok);
+  auto& s = rx.stats();
+  EXPECT_EQ(s.unknown_index, 3u); // the hello twice, the reply
+  EXPECT_EQ(s.challenges_sent, 1u);
+  EXPECT_EQ(s.challenges_passed, 1u);
+  EXPECT_EQ(s.accepted, 1u);
+}
+
+TEST(auth, challenge_replies_are_accepted_only_with_the_live_nonce_in_time) {
+  // Each row: what rx challenged (and when), then which reply arrives.
+  struct row {
+    const char* name;
+    std::function<auth_result(authenticator& tx, authenticator& rx)> run;
+    auth_result expected;
+    /// Challenges rx remembers afterwards.
+    size_t live;
+  };
+  auto challenge = [](authenticator& rx, uint32_t index, time_point at) {
+    challenge_nonce n{};
+    EXPECT_TRUE(rx.challenge(index, at, n));
+    return n;
+  };
+  std::vector<row> rows{
+    {"the live nonce",
+     [&](authenticator& tx, authenticator& rx) {
+       auto n = challenge(rx, tx.index(), t0);
+       return deliver_reply(tx, rx, n, t0 + 1s);
+     },
+     auth_result::ok, 0},
+    {"at the timeout exactly",
+     [&](authenticator& tx, authenticator& rx) {
+       auto n = challenge(rx, tx.index(), t0);
+       return deliver_reply(tx, rx, n, t0 + 30s);
+     },
+     auth_result::ok, 0},
+    {"after the timeout (expired)",
+     [&](authenticator& tx, authenticator& rx) {
+       auto n = challenge(rx, tx.index(), t0);
+       return deliver_reply(tx, rx, n, t0 + 30s + 1ms);
+     },
+     auth_result::challenge_failed, 0},
+    {"no challenge was sent",
+     [&](authenticator& tx, authenticator& rx) {
+       return deliver_reply(tx, rx, challenge_nonce{1}, t0);
+     },
+     auth_result::challenge_failed, 0},
+    {"a stale nonce: the reply to an earlier challenge, replaced",
+     [&](authenticator& tx, authenticator& rx) {
+       auto old = challenge(rx, tx.index(), t0);
+       challenge(rx, tx.index(), t0 + 300ms);
+       return deliver_reply(tx, rx, old, t0 + 400ms);
+     },
+     auth_result::challenge_failed, 1},
+    {"a recorded reply replayed to a new challenge",
+     [&](authenticator& tx, authenticator& rx) {
+       // Recorded when another receiver challenged tx; rx never sent it.
+       authenticator elsewhere{config(), 9, counting_nonces(1000)};
+       auto n = challenge(elsewhere, tx.index(), t0);
+       auto recorded = reply_from(tx, n);
+       challenge(rx, tx.index(), t0 + 1s);
+       auth_trailer t;
+       EXPECT_EQ(rx.verify(recorded.data(), recorded.size(), eth, t0 + 1s, t),
+                 auth_result::unknown_index);
+       return rx.accept_reply(t, n, t0 + 1s);
+     },
+     auth_result::challenge_failed, 1},
+    {"one bit of the nonce flipped",
+     [&](authenticator& tx, authenticator& rx) {
+       auto n = challenge(rx, tx.index(), t0);
+       n[7] ^= 0x80;
+       return deliver_reply(tx, rx, n, t0);
+     },
+     auth_result::challenge_failed, 1},
+    {"another index's nonce",
+     [&](authenticator& tx, authenticator& rx) {
+       auto n = challenge(rx, tx.index() + 1, t0);
+       return deliver_reply(tx, rx, n, t0);
+     },
+     auth_result::challenge_failed, 1},
+    {"the live nonce after a wrong one",
+     [&](authenticator& tx, authenticator& rx) {
+       auto n = challenge(rx, tx.index(), t0);
+       auto wrong = n;
+       wrong[0] ^= 1;
+       EXPECT_EQ(deliver_reply(tx, rx, wrong, t0), auth_result::challenge_failed);
+       return deliver_reply(tx, rx, n, t0);
+     },
+     auth_result::ok, 0},
+    {"the same reply twice",
+     [&](authenticator& tx, authenticator& rx) {
+       auto n = challenge(rx, tx.index(), t0);
+       auto p = reply_from(tx, n);
+       auth_trailer t;
+       EXPECT_EQ(rx.verify(p.data(), p.size(), eth, t0, t),
+                 auth_result::unknown_index);
+       EXPECT_EQ(rx.accept_reply(t, n, t0), auth_result::ok);
+       // Known now, and its counter is not above itself.
+       return rx.verify(p.data(), p.size(), eth, t0, t);
+     },
+     auth_result::replayed, 0},
+  };
+  for (auto& r : rows) {
+    SCOPED_TRACE(r.name);
+    authenticator tx{config(), 0x5000};
+    authenticator rx{config(), 6, counting_nonces()};
+    EXPECT_EQ(r.run(tx, rx), r.expected);
+    EXPECT_EQ(rx.senders(), r.expected == auth_result::challenge_failed ? 0u : 1u);
+    EXPECT_EQ(rx.challenges(), r.live);
+  }
+}
+
+TEST(auth, challenges_are_rate_limited_per_index) {
+  authenticator rx{config(), 6, counting_nonces()};
+  challenge_nonce n{}, m{};
+  EXPECT_TRUE(rx.challenge(1, t0, n));
+  // A recording replayed fast: one request per index per 300 ms.
+  EXPECT_FALSE(rx.challenge(1, t0 + 1ms, m));
+  EXPECT_FALSE(rx.challenge(1, t0 + 299ms, m));
+  EXPECT_EQ(m, challenge_nonce{});
+  // Other indexes are not held back.
+  EXPECT_TRUE(rx.challenge(2, t0 + 1ms, m));
+  // After the interval: a new nonce, which replaces the old one.
+  EXPECT_TRUE(rx.challenge(1, t0 + 300ms, m));
+  EXPECT_NE(m, n);
+  EXPECT_EQ(rx.challenges(), 2u);
+  EXPECT_EQ(rx.stats().challenges_sent, 3u);
+  EXPECT_EQ(rx.stats().challenges_limited, 2u);
+}
+
+TEST(auth, challenge_replies_are_rate_limited_per_requesting_index) {
+  auto cfg = config();
+  cfg.max_senders = 2;
+  authenticator tx{cfg, 6};
+  EXPECT_TRUE(tx.may_reply(1, t0));
+  EXPECT_FALSE(tx.may_reply(1, t0 + 299ms));
+  EXPECT_TRUE(tx.may_reply(2, t0 + 1ms));
+  // Two requesters answered within the interval fill the table: a third
+  // waits (a flood of replayed requests costs at most 2 replies / 300 ms).
+  EXPECT_FALSE(tx.may_reply(3, t0 + 2ms));
+  EXPECT_TRUE(tx.may_reply(1, t0 + 300ms));
+  EXPECT_TRUE(tx.may_reply(3, t0 + 301ms));
+  EXPECT_EQ(tx.stats().replies, 4u);
+  EXPECT_EQ(tx.stats().replies_limited, 2u);
+}
+
+TEST(auth, the_challenge_table_is_bounded_and_the_oldest_challenge_goes) {
+  auto cfg = config();
+  cfg.max_senders = 2;
+  authenticator rx{cfg, 6, counting_nonces()};
+  authenticator s1{config(), 1}, s2{config(), 2}, s3{config(), 3};
+  challenge_nonce n1, n2, n3;
+  ASSERT_TRUE(rx.challenge(1, t0, n1));
+  ASSERT_TRUE(rx.challenge(2, t0 + 1ms, n2));
+  ASSERT_TRUE(rx.challenge(3, t0 + 2ms, n3));
+  EXPECT_EQ(rx.challenges(), 2u);
+  EXPECT_EQ(deliver_reply(s1, rx, n1, t0 + 3ms), auth_result::challenge_failed);
+  EXPECT_EQ(deliver_reply(s3, rx, n3, t0 + 3ms), auth_result::ok);
+  EXPECT_EQ(deliver_reply(s2, rx, n2, t0 + 3ms), auth_result::ok);
+  // Expired challenges make room before live ones are dropped.
+  ASSERT_TRUE(rx.challenge(4, t0, n1));
+  ASSERT_TRUE(rx.challenge(5, t0 + 40s, n2));
+  ASSERT_TRUE(rx.challenge(6, t0 + 40s, n3));
+  EXPECT_EQ(rx.challenges(), 2u);
+}
+
+TEST(auth, no_challenge_without_random_bytes) {
+  authenticator rx{config(), 6, [](uint8_t*, size_t) { return false; }};
+  challenge_nonce n{};
+  EXPECT_FALSE(rx.challenge(1, t0, n));
+  EXPECT_EQ(rx.challenges(), 0u);
+  // The default source (RAND_bytes) gives different nonces.
+  authenticator real{config(), 7};
+  challenge_nonce a{}, b{};
+  ASSERT_TRUE(real.challenge(1, t0, a));
+  ASSERT_TRUE(real.challenge(2, t0, b));
+  EXPECT_NE(a, b);
+}
+
+TEST(auth, the_trailer_is_read_whenever_the_tag_is_right) {
+  // A challenge request is answered whatever its index and counter, so
+  // verify says who signed it on every result with a right tag.
+  authenticator tx{config(), 0xABCD};
+  authenticator rx{config(), 6};
+  byte_buffer req;
+  encode(challenge_request{{1, 2, 3, 4, 5, 6, 7, 8}}, req);
+  tx.sign(req, eth);
+  auth_trailer t;
+  EXPECT_EQ(rx.verify(req.data(), req.size(), eth, t0, t),
+            auth_result::unknown_index);
+  EXPECT_EQ(t.index, 0xABCDu);
+  EXPECT_EQ(t.counter, 1u);
+  EXPECT_EQ(t.body_size, 9u);
+  introduce(tx, rx);
+  auth_trailer again;
+  EXPECT_EQ(rx.verify(req.data(), req.size(), eth, t0, again),
+            auth_result::replayed);
+  EXPECT_EQ(again.index, 0xABCDu);
+  EXPECT_EQ(again.body_size, 9u);
+  auth_trailer none;
+  req[0] ^= 1;
+  EXPECT_EQ(rx.verify(req.data(), req.size(), eth, t0, none), auth_result::bad_tag);
+  EXPECT_EQ(none.index, 0u);
+  EXPECT_EQ(none.body_size, 0u);
 }
 
 // -- which data packets are signed ----------------------------------------------------
@@ -327,6 +647,23 @@ TEST(auth_layout, the_authenticated_flag_is_data_header_bit_5) {
   set_authenticated(b.data(), false);
   EXPECT_EQ(b[6], 0x0E);
   EXPECT_FALSE(decode_data_header(b.data(), b.size())->authenticated);
+}
+
+TEST(auth_layout, a_signed_challenge_request_is_9_plus_13_plus_tag_bytes) {
+  // The example of docs/protocol.md, "Authentication": nonce 01..08,
+  // signed by index 0x0A0B0C0D with counter 7.
+  authenticator tx{config(), 0x0A0B0C0D};
+  for (int i = 0; i < 6; ++i) {
+    byte_buffer skip;
+    tx.sign(skip, eth);
+  }
+  byte_buffer p;
+  encode(challenge_request{{1, 2, 3, 4, 5, 6, 7, 8}}, p);
+  tx.sign(p, eth);
+  EXPECT_EQ(p.size(), 9u + 13u + 8u);
+  EXPECT_EQ(byte_buffer(p.begin(), p.begin() + 22),
+            byte_buffer({0x16, 1, 2, 3, 4, 5, 6, 7, 8, 0x01, 0x0D, 0x0C, 0x0B,
+                         0x0A, 7, 0, 0, 0, 0, 0, 0, 0}));
 }
 
 TEST(auth_layout, a_signed_hello_is_15_plus_13_plus_tag_bytes) {

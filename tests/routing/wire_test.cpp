@@ -95,6 +95,14 @@ void expect_same(const claim& x, const claim& y) {
   EXPECT_EQ(x.hop_limit, y.hop_limit);
 }
 
+void expect_same(const challenge_request& x, const challenge_request& y) {
+  EXPECT_EQ(x.nonce, y.nonce);
+}
+
+void expect_same(const challenge_reply& x, const challenge_reply& y) {
+  EXPECT_EQ(x.nonce, y.nonce);
+}
+
 void expect_same(const conflict& x, const conflict& y) {
   EXPECT_EQ(x.id, y.id);
   EXPECT_EQ(x.holder_instance, y.holder_instance);
@@ -174,6 +182,10 @@ const std::vector<codec>& codecs() {
                               decode_seqno_request),
     make_codec("claim", packet_type::claim, decode_claim),
     make_codec("conflict", packet_type::conflict, decode_conflict),
+    make_codec("challenge_request", packet_type::challenge_request,
+               decode_challenge_request),
+    make_codec("challenge_reply", packet_type::challenge_reply,
+               decode_challenge_reply),
   };
   return all;
 }
@@ -218,6 +230,10 @@ std::vector<sample> samples() {
       enc(claim{0x1234, 0xDEADBEEFCAFEF00D, 0x1122334455667788, 32}));
   add("conflict", packet_type::conflict,
       enc(conflict{0x1234, 0xA, 0xB, 0xC, 31}));
+  add("challenge_request", packet_type::challenge_request,
+      enc(challenge_request{{9, 8, 7, 6, 5, 4, 3, 2}}));
+  add("challenge_reply", packet_type::challenge_reply,
+      enc(challenge_reply{{0xFF, 0, 0xFF, 0, 1, 2, 3, 4}}));
   return out;
 }
 
@@ -225,7 +241,7 @@ std::vector<sample> samples() {
 
 // -- first byte ------------------------------------------------------------------
 
-TEST(wire_type, peek_type_reads_version_1_and_the_six_types) {
+TEST(wire_type, peek_type_reads_version_1_and_the_eight_types) {
   struct row {
     int byte0;
     std::optional<packet_type> expected;
@@ -234,7 +250,9 @@ TEST(wire_type, peek_type_reads_version_1_and_the_six_types) {
     {0x10, packet_type::data},          {0x11, packet_type::hello},
     {0x12, packet_type::update},        {0x13, packet_type::seqno_request},
     {0x14, packet_type::claim},         {0x15, packet_type::conflict},
-    {0x16, std::nullopt},               {0x1F, std::nullopt},
+    {0x16, packet_type::challenge_request},
+    {0x17, packet_type::challenge_reply},
+    {0x18, std::nullopt},               {0x1F, std::nullopt},
     {0x00, std::nullopt},               {0x01, std::nullopt},
     {0x20, std::nullopt},               {0x21, std::nullopt},
     {0xF1, std::nullopt},               {0xFF, std::nullopt},
@@ -361,6 +379,16 @@ TEST(wire_layout, conflict_is_twenty_eight_bytes) {
                    0x09}));
 }
 
+TEST(wire_layout, challenge_request_and_reply_are_nine_bytes) {
+  // The examples of docs/protocol.md, "Authentication".
+  challenge_nonce n{0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08};
+  EXPECT_EQ(enc(challenge_request{n}),
+            bytes({0x16, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08}));
+  EXPECT_EQ(enc(challenge_reply{n}),
+            bytes({0x17, 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08}));
+  EXPECT_EQ(challenge_nonce_size, 8u);
+}
+
 TEST(wire_layout, the_largest_update_with_32_hop_paths_takes_3660_bytes) {
   // 12 header bytes + 24 entries * (4 + 4 * (4 + 1 + 32)).
   EXPECT_EQ(enc(largest_update()).size(), 3660u);
@@ -461,6 +489,22 @@ TEST(wire_round_trip, seqno_requests_claims_and_conflicts_survive_boundary_value
     auto d = decode_conflict(b.data(), b.size());
     ASSERT_TRUE(d) << render(d.error());
     expect_same(*d, x);
+  }
+}
+
+TEST(wire_round_trip, challenges_survive_every_nonce_byte) {
+  for (int v : {0x00, 0x01, 0x7F, 0x80, 0xFF}) {
+    challenge_nonce n;
+    n.fill(static_cast<uint8_t>(v));
+    n[3] = static_cast<uint8_t>(~v);
+    auto b = enc(challenge_request{n});
+    auto d = decode_challenge_request(b.data(), b.size());
+    ASSERT_TRUE(d) << render(d.error());
+    expect_same(*d, challenge_request{n});
+    b = enc(challenge_reply{n});
+    auto r = decode_challenge_reply(b.data(), b.size());
+    ASSERT_TRUE(r) << render(r.error());
+    expect_same(*r, challenge_reply{n});
   }
 }
 
@@ -585,6 +629,14 @@ TEST(wire_malformed, errors_say_what_was_wrong) {
   auto h = [](const byte_buffer& b) { return error_of(decode_hello(b.data(), b.size())); };
   auto u = [](const byte_buffer& b) { return error_of(decode_update(b.data(), b.size())); };
   auto c = [](const byte_buffer& b) { return error_of(decode_claim(b.data(), b.size())); };
+  auto cq = [](const byte_buffer& b) {
+    return error_of(decode_challenge_request(b.data(), b.size()));
+  };
+  auto cp = [](const byte_buffer& b) {
+    return error_of(decode_challenge_reply(b.data(), b.size()));
+  };
+  auto request_bytes = enc(challenge_request{});
+  auto reply_bytes = enc(challenge_reply{});
   auto d = [](const byte_buffer& b) {
     return error_of(decode_data_header(b.data(), b.size()));
   };
@@ -627,6 +679,16 @@ TEST(wire_malformed, errors_say_what_was_wrong) {
     {"truncated hello", minus(hello_bytes, 1), h, "hello: truncated: 14 of 15 bytes"},
     {"trailing", plus(hello_bytes, 3), h, "hello: 3 trailing bytes"},
     {"claim truncated", bytes({0x14, 1}), c, "claim: truncated: 2 of 20 bytes"},
+    {"challenge request truncated", minus(request_bytes, 4), cq,
+     "challenge_request: truncated: 5 of 9 bytes"},
+    {"challenge request trailing", plus(request_bytes, 21), cq,
+     "challenge_request: 21 trailing bytes"},
+    {"challenge reply truncated", minus(reply_bytes, 1), cp,
+     "challenge_reply: truncated: 8 of 9 bytes"},
+    {"challenge reply trailing", plus(reply_bytes, 1), cp,
+     "challenge_reply: 1 trailing bytes"},
+    {"challenge reply for a request", request_bytes, cp,
+     "challenge_reply: packet of type 6 (challenge_request)"},
     {"data header", bytes({0x10, 1, 2, 3}), d, "data: truncated header: 4 of 8 bytes"},
     {"update header", bytes({0x12, 1, 2, 3}), u, "update: truncated header: 4 of 12 bytes"},
     {"too many entries", count_25, u, "update: 25 entries, at most 24"},
