@@ -14,15 +14,33 @@ if(TARGET CAF::core AND TARGET CAF::io)
   return()
 endif()
 
-find_path(CAF_INCLUDE_DIR caf/all.hpp)
-find_library(CAF_CORE_LIBRARY caf_core)
-find_library(CAF_IO_LIBRARY caf_io)
+# HERM_CAF_ROOT: a CAF installed elsewhere, searched before (and instead of)
+# the system's; tests/tsan/build-caf.sh installs one built with
+# ThreadSanitizer there.
+set(HERM_CAF_ROOT "" CACHE PATH "Prefix of a CAF 0.17.6 to use instead of the system's")
+if(HERM_CAF_ROOT)
+  find_path(CAF_INCLUDE_DIR caf/all.hpp PATHS "${HERM_CAF_ROOT}/include"
+            NO_DEFAULT_PATH)
+  find_library(CAF_CORE_LIBRARY caf_core PATHS "${HERM_CAF_ROOT}/lib"
+               NO_DEFAULT_PATH)
+  find_library(CAF_IO_LIBRARY caf_io PATHS "${HERM_CAF_ROOT}/lib"
+               NO_DEFAULT_PATH)
+else()
+  find_path(CAF_INCLUDE_DIR caf/all.hpp)
+  find_library(CAF_CORE_LIBRARY caf_core)
+  find_library(CAF_IO_LIBRARY caf_io)
+endif()
+if(HERM_CAF_ROOT)
+  set(HERM_CAF_ROOT_HINT
+      "; HERM_CAF_ROOT='${HERM_CAF_ROOT}' was searched only (tests/tsan/build-caf.sh fills it)")
+endif()
 if(NOT CAF_INCLUDE_DIR OR NOT CAF_CORE_LIBRARY OR NOT CAF_IO_LIBRARY)
   message(FATAL_ERROR
     "HERM needs the C++ Actor Framework 0.17.6 (headers caf/all.hpp, libraries "
     "caf_core and caf_io). Found: headers='${CAF_INCLUDE_DIR}' "
     "core='${CAF_CORE_LIBRARY}' io='${CAF_IO_LIBRARY}'. "
-    "Install it with: sudo apt-get install libcaf-dev   (or run .ci/setup)")
+    "Install it with: sudo apt-get install libcaf-dev   (or run .ci/setup)"
+    "${HERM_CAF_ROOT_HINT}")
 endif()
 file(STRINGS "${CAF_INCLUDE_DIR}/caf/config.hpp" caf_version_line
      REGEX "^#define CAF_VERSION [0-9]+")

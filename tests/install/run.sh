@@ -3,16 +3,18 @@
 # runs tests/install/consumer/ (an outside project: find_package(herm),
 # herm::herm) against that prefix only, and checks what it prints.
 #
-#   run.sh CMAKE BUILD_DIR CONSUMER_SOURCE_DIR GENERATOR CXX_COMPILER [FLAGS]
+#   run.sh CMAKE BUILD_DIR CONSUMER_SOURCE_DIR GENERATOR CXX_COMPILER [FLAGS [CAF_ROOT]]
 #
 # FLAGS: compile and link flags the consumer needs to link HERM's libraries
 # (the sanitizer flags of a -DHERM_SANITIZE=ON or -DHERM_TSAN=ON build).
+# CAF_ROOT: the HERM_CAF_ROOT the build used (a CAF outside the system's,
+# e.g. the one tests/tsan/build-caf.sh builds); the consumer must link it too.
 #
 # Writes only below a temporary directory (removed on exit). `cmake --install`
 # also writes BUILD_DIR/install_manifest.txt; that file is put back as it was.
 set -euo pipefail
 
-cmake=$1 build=$2 consumer=$3 generator=$4 cxx=$5 flags=${6:-}
+cmake=$1 build=$2 consumer=$3 generator=$4 cxx=$5 flags=${6:-} caf_root=${7:-}
 
 tmp=$(mktemp -d "${TMPDIR:-/tmp}/herm-install-test.XXXXXX")
 manifest="$build/install_manifest.txt"
@@ -72,6 +74,7 @@ if ! "$cmake" -S "$consumer" -B "$tmp/consumer" -G "$generator" \
       -DCMAKE_CXX_COMPILER="$cxx" -DCMAKE_PREFIX_PATH="$prefix" \
       -DCMAKE_FIND_PACKAGE_NO_PACKAGE_REGISTRY=ON \
       -DCMAKE_CXX_FLAGS="$flags" -DCMAKE_EXE_LINKER_FLAGS="$flags" \
+      ${caf_root:+-DHERM_CAF_ROOT="$caf_root"} \
       > "$tmp/configure.log" 2>&1; then
   cat "$tmp/configure.log"; echo "FAIL: configuring the consumer failed"; exit 1
 fi

@@ -1,0 +1,30 @@
+#!/bin/bash
+# The whole test suite under ThreadSanitizer, with CAF itself instrumented:
+#
+#   tests/tsan/run.sh [CTEST_ARGS...]     e.g. tests/tsan/run.sh -R hotplug
+#
+# 1. tests/tsan/build-caf.sh builds CAF 0.17.6 with -fsanitize=thread into
+#    build-caf-tsan (once; about 15 minutes on 2 cores);
+# 2. configures build-tsan with -DHERM_TSAN=ON -DHERM_CAF_ROOT=build-caf-tsan
+#    and builds it;
+# 3. runs ctest there (without the 1,000-module simulation and the qemu
+#    kernel test, as the ASan stage of .ci/run). Every test gets
+#    TSAN_OPTIONS with tests/tsan/tsan.supp; a report makes its process exit
+#    with 66, so the test fails.
+#
+# Not part of .ci/run (the instrumented CAF alone takes a quarter of CI's
+# budget); docs/reliability.md, "Sanitizers", has the latest results.
+
+set -euo pipefail
+repo=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$repo"
+jobs=${HERM_JOBS:-2}
+HERM_JOBS=$jobs tests/tsan/build-caf.sh "$repo/build-caf-tsan"
+cmake -S . -B build-tsan -G Ninja -DHERM_TSAN=ON \
+      -DHERM_CAF_ROOT="$repo/build-caf-tsan" -DHERM_BUILD_BENCHMARKS=OFF \
+      -DCMAKE_BUILD_TYPE=RelWithDebInfo
+cmake --build build-tsan -j"$jobs"
+if [ $# -eq 0 ]; then
+  set -- -E 'large|can_real_kernel'
+fi
+ctest --test-dir build-tsan --output-on-failure -j"$jobs" "$@"
