@@ -55,7 +55,11 @@ using namespace std::chrono_literals;
 
 namespace {
 
-volatile std::sig_atomic_t stop_requested = 0;
+// Set by SIGTERM/SIGINT, which may run on any thread (CAF's workers
+// included): a lock-free atomic, not a volatile sig_atomic_t, which only
+// the interrupted thread may read safely.
+std::atomic<bool> stop_requested{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
 
 /// Set by `call` at its first reply: a caller's --flap counts from there,
 /// so that it falls among the requests however long start-up took.
@@ -170,10 +174,10 @@ std::string make_text(uint32_t i, uint32_t size) {
 /// Sleeps `d` in short steps; false if a signal asked us to stop.
 bool nap(std::chrono::milliseconds d) {
   auto until = clock_type::now() + d;
-  while (stop_requested == 0 && clock_type::now() < until)
+  while (!stop_requested && clock_type::now() < until)
     std::this_thread::sleep_for(std::min<clock_type::duration>(
       20ms, until - clock_type::now()));
-  return stop_requested == 0;
+  return !stop_requested;
 }
 
 // -- the actors ----------------------------------------------------------------------
@@ -305,7 +309,7 @@ caf::actor bind_by_name(caf::scoped_actor& self, const module_handles& m,
                         bool rebind = false, bool reliable = false) {
   caf::actor proxy;
   caf::error err;
-  while (!proxy && stop_requested == 0 && clock_type::now() < until) {
+  while (!proxy && !stop_requested && clock_type::now() < until) {
     self->request(m.apps, 5s, atom::bind_v,
                   bind_request{query_by::name, name, 1000, rebind, reliable})
       .receive([&](caf::actor& p) { proxy = p; },
@@ -351,7 +355,7 @@ int call(caf::scoped_actor& self, const module_handles& m, const options& o) {
   uint32_t in_flight = 0;
   auto main = caf::actor_cast<caf::actor>(self);
   auto per_request = seconds(o.timeout);
-  while ((!todo.empty() || in_flight > 0) && stop_requested == 0) {
+  while ((!todo.empty() || in_flight > 0) && !stop_requested) {
     while (!todo.empty() && in_flight < std::max<uint32_t>(o.window, 1)) {
       auto i = todo.back();
       todo.pop_back();
@@ -394,7 +398,7 @@ int call(caf::scoped_actor& self, const module_handles& m, const options& o) {
     self->monitor(proxy);
     bool down = false;
     auto deadline = clock_type::now() + seconds(o.timeout);
-    while (!down && stop_requested == 0 && clock_type::now() < deadline)
+    while (!down && !stop_requested && clock_type::now() < deadline)
       self->receive(
         [&](caf::down_msg& msg) {
           std::cout << "down " << render(msg.reason) << std::endl;
@@ -485,7 +489,7 @@ int subscribe(caf::scoped_actor& self, const module_handles& m,
   std::cout << "ready" << std::endl;
   uint32_t received = 0;
   auto deadline = clock_type::now() + seconds(o.timeout);
-  while (received < o.count && stop_requested == 0
+  while (received < o.count && !stop_requested
          && clock_type::now() < deadline)
     self->receive(
       [&](int32_t v) {
@@ -592,8 +596,8 @@ int main(int argc, char** argv) {
               << std::endl;
     return 2;
   }
-  std::signal(SIGTERM, [](int) { stop_requested = 1; });
-  std::signal(SIGINT, [](int) { stop_requested = 1; });
+  std::signal(SIGTERM, [](int) { stop_requested = true; });
+  std::signal(SIGINT, [](int) { stop_requested = true; });
 
   caf::actor_system_config cfg;
   configure(cfg);
@@ -639,7 +643,7 @@ int main(int argc, char** argv) {
       status = subscribe(self, *m, o);
   }
   if (flapper.joinable()) {
-    stop_requested = 1;
+    stop_requested = true;
     flapper.join();
   }
   stop_module(*m);

@@ -10,6 +10,7 @@
 // exchange failed (missing or corrupted echo, timeout), 2 bad arguments or
 // the device or channel could not be opened (the typed error is printed).
 
+#include <atomic>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
@@ -32,7 +33,11 @@ using namespace herm;
 
 namespace {
 
-volatile std::sig_atomic_t stop_requested = 0;
+// Set by SIGTERM/SIGINT, which may run on any thread (CAF's workers
+// included): a lock-free atomic, not a volatile sig_atomic_t, which only
+// the interrupted thread may read safely.
+std::atomic<bool> stop_requested{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
 
 /// Packet payload for sequence number `seq`: 8-byte header (seq, size) and a
 /// pattern derived from both, so any corruption or mix-up is detected.
@@ -109,8 +114,8 @@ int main(int argc, char** argv) {
     }
     dev.options[kv.substr(0, eq)] = kv.substr(eq + 1);
   }
-  std::signal(SIGTERM, [](int) { stop_requested = 1; });
-  std::signal(SIGINT, [](int) { stop_requested = 1; });
+  std::signal(SIGTERM, [](int) { stop_requested = true; });
+  std::signal(SIGINT, [](int) { stop_requested = true; });
 
   caf::actor_system_config cfg;
   configure(cfg, o.scheduler);
@@ -153,7 +158,7 @@ int main(int argc, char** argv) {
   };
   auto on_event = [](link_event&) {};
   if (echo->parsed() || recv->parsed()) {
-    while (running && stop_requested == 0
+    while (running && !stop_requested
            && (o.count == 0 || received < o.count)) {
       self->receive(
         [&](packet_received& pkt) {
@@ -172,7 +177,7 @@ int main(int argc, char** argv) {
     std::map<uint32_t, byte_buffer> in_flight;
     uint32_t next = 0, echoed = 0, bad = 0;
     auto deadline = std::chrono::steady_clock::now() + idle;
-    while (running && stop_requested == 0) {
+    while (running && !stop_requested) {
       while (next < o.count && (!o.expect_echo || in_flight.size() < o.window)) {
         auto payload = make_payload(next, dist(rng));
         if (o.expect_echo)

@@ -11,6 +11,7 @@
 //
 // Prints "reading SEQ DISTANCE_MM" per reading. SIGTERM/SIGINT stop it.
 
+#include <atomic>
 #include <csignal>
 #include <chrono>
 #include <cmath>
@@ -26,7 +27,11 @@
 
 namespace {
 
-volatile std::sig_atomic_t stop = 0;
+// Set by SIGTERM/SIGINT, which may run on any thread (CAF's workers
+// included): a lock-free atomic, not a volatile sig_atomic_t, which only
+// the interrupted thread may read safely.
+std::atomic<bool> stop{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
 
 /// Ignores what the line brings (the board only talks).
 class deaf : public herm::frame_handler {
@@ -36,7 +41,7 @@ public:
   void on_event(herm::link_event_kind, herm::link_addr, std::string) override {}
   void on_failure(caf::error reason) override {
     std::cout << "line failed: " << herm::render(reason) << std::endl;
-    stop = 1;
+    stop = true;
   }
 };
 
@@ -53,8 +58,8 @@ int main(int argc, char** argv) {
   app.add_option("--period-ms", period_ms, "one reading every this many ms");
   app.add_option("--count", count, "stop after N readings (0: never)");
   CLI11_PARSE(app, argc, argv);
-  std::signal(SIGTERM, [](int) { stop = 1; });
-  std::signal(SIGINT, [](int) { stop = 1; });
+  std::signal(SIGTERM, [](int) { stop = true; });
+  std::signal(SIGINT, [](int) { stop = true; });
 
   auto* kind = herm::find_link_kind("serial");
   auto drv = kind->open(herm::device_config{
@@ -71,7 +76,7 @@ int main(int argc, char** argv) {
   std::cout << "ready device=" << device << " baud=" << baud
             << " period_ms=" << period_ms << std::endl;
   auto next = std::chrono::steady_clock::now();
-  for (uint16_t seq = 1; stop == 0 && (count == 0 || seq <= count); ++seq) {
+  for (uint16_t seq = 1; !stop && (count == 0 || seq <= count); ++seq) {
     next += std::chrono::milliseconds(period_ms);
     // An obstacle drifting between 0.3 and 2.5 m.
     auto mm = static_cast<uint16_t>(1400 + 1100 * std::sin(seq * 0.35));
@@ -82,7 +87,7 @@ int main(int argc, char** argv) {
         std::cout << "send failed: " << herm::render(err) << std::endl;
     });
     std::cout << "reading " << seq << " " << mm << std::endl;
-    while (stop == 0 && std::chrono::steady_clock::now() < next)
+    while (!stop && std::chrono::steady_clock::now() < next)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   (*drv)->stop();

@@ -10,6 +10,7 @@
 // loopback here; over CAN, IEEE 1394 or a serial line the code is the same.
 // docs/user-guide quotes the regions marked "// [name]" ... "// [name-end]".
 
+#include <atomic>
 #include <chrono>
 #include <csignal>
 #include <iostream>
@@ -54,7 +55,11 @@ CAF_END_TYPE_ID_BLOCK(calculator_example)
 
 namespace {
 
-volatile std::sig_atomic_t stop_requested = 0;
+// Set by SIGTERM/SIGINT, which may run on any thread (CAF's workers
+// included): a lock-free atomic, not a volatile sig_atomic_t, which only
+// the interrupted thread may read safely.
+std::atomic<bool> stop_requested{false};
+static_assert(std::atomic<bool>::is_always_lock_free);
 
 /// Prints one whole line: the topic listener prints from another thread.
 void say(const std::string& line) {
@@ -143,7 +148,7 @@ int serve(caf::actor_system& sys, const herm::module_handles& m, int seconds) {
     return 1;
   }
   auto until = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
-  while (stop_requested == 0
+  while (!stop_requested
          && (seconds <= 0 || std::chrono::steady_clock::now() < until))
     std::this_thread::sleep_for(50ms);
   self->send_exit(apo, caf::exit_reason::user_shutdown);
@@ -255,8 +260,8 @@ int main(int argc, char** argv) {
     port = serving ? 47100 : 47101;
   if (peer.empty())
     peer = serving ? "127.0.0.1:47101" : "127.0.0.1:47100";
-  std::signal(SIGTERM, [](int) { stop_requested = 1; });
-  std::signal(SIGINT, [](int) { stop_requested = 1; });
+  std::signal(SIGTERM, [](int) { stop_requested = true; });
+  std::signal(SIGINT, [](int) { stop_requested = true; });
 
   // HERM's types, then ours.
   caf::actor_system_config cfg;
