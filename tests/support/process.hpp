@@ -52,6 +52,22 @@ public:
     return pid_ > 0;
   }
 
+  pid_t pid() const {
+    return pid_;
+  }
+
+  /// True while the child has not exited (reaps it if it has).
+  bool running() {
+    if (pid_ <= 0 || status_)
+      return false;
+    int st = 0;
+    if (::waitpid(pid_, &st, WNOHANG) == pid_) {
+      status_ = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+      return false;
+    }
+    return true;
+  }
+
   /// Everything the child printed so far.
   const std::string& output() const {
     return out_;
