@@ -17,13 +17,25 @@
 // (stop and "flush me" wake-ups), reads what arrived, feeds the decoder and
 // calls the handler. A hangup (pty master closed, USB adapter unplugged:
 // POLLHUP, EOF, EIO, ENODEV) ends the thread after one on_failure.
+//
+// Ownership of the line: flock(LOCK_EX | LOCK_NB) on the open tty
+// (LOCK_SH with exclusive: false), as picocom and other serial tools do.
+// The kernel releases it with the last descriptor of the open file, so it
+// dies with its holder, also on SIGKILL: a restarted module gets its line
+// back at once. TIOCEXCL is deliberately not used: the flag belongs to the
+// tty, not to the process, so a holder killed with SIGKILL leaves it set
+// for as long as the line stays open elsewhere (the master of a pty, a
+// relay, getty), and then every restart fails with EBUSY, which no one
+// can tell from a live holder (it also never stopped root). A live holder
+// is named from /proc/locks in the refusal.
 
 #include <fcntl.h>
 #include <poll.h>
 #include <pthread.h>
 #include <sys/eventfd.h>
 #include <sys/file.h>
-#include <sys/ioctl.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -31,8 +43,10 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <system_error>
 #include <thread>
@@ -243,8 +257,6 @@ public:
       tx_head_ = 0;
       // Errors are irrelevant here (e.g. the line hung up already).
       ::tcflush(fd_, TCIOFLUSH);
-      if (set_.exclusive)
-        ::ioctl(fd_, TIOCNXCL);
       ::close(fd_); // also releases the flock
       fd_ = -1;
     }
@@ -577,6 +589,55 @@ private:
 
 // -- open ----------------------------------------------------------------------
 
+/// Reads at most `limit` bytes of a /proc file (they do not report a size).
+std::string read_proc(const char* path, size_t limit) {
+  std::string result;
+  unique_fd fd{::open(path, O_RDONLY | O_CLOEXEC)};
+  if (!fd)
+    return result;
+  char buf[4096];
+  while (result.size() < limit) {
+    auto n = ::read(fd.get(), buf, sizeof(buf));
+    if (n < 0 && errno == EINTR)
+      continue;
+    if (n <= 0)
+      break;
+    result.append(buf, static_cast<size_t>(n));
+  }
+  return result;
+}
+
+/// " by process PID (NAME)" for a process holding an flock on the same file
+/// as `fd`, from /proc/locks; empty when none is listed (best effort: the
+/// refusal stands either way).
+std::string lock_holder(int fd) {
+  struct stat st;
+  if (::fstat(fd, &st) != 0)
+    return {};
+  // /proc/locks: "1: FLOCK  ADVISORY  WRITE 1234 00:18:5 0 EOF", the file
+  // as MAJOR:MINOR:INODE of its file system (hex, hex, decimal).
+  char id[64];
+  std::snprintf(id, sizeof(id), "%02x:%02x:%llu", ::major(st.st_dev),
+                ::minor(st.st_dev), static_cast<unsigned long long>(st.st_ino));
+  std::istringstream in{read_proc("/proc/locks", 1 << 20)};
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream fields{line};
+    std::string num, type, mode, access, pid, file;
+    fields >> num >> type;
+    if (type == "->") // a waiter, not a holder
+      continue;
+    fields >> mode >> access >> pid >> file;
+    if (type != "FLOCK" || file != id || pid.empty() || pid == "-1")
+      continue;
+    auto comm = read_proc(("/proc/" + pid + "/comm").c_str(), 64);
+    while (!comm.empty() && (comm.back() == '\n' || comm.back() == '\0'))
+      comm.pop_back();
+    return " by process " + pid + (comm.empty() ? "" : " (" + comm + ")");
+  }
+  return {};
+}
+
 caf::expected<link_driver_ptr> open_serial(const device_config& cfg) {
   auto set = serial::read_settings(cfg);
   if (!set)
@@ -587,42 +648,34 @@ caf::expected<link_driver_ptr> open_serial(const device_config& cfg) {
                                                 + "': serial line " + path
                                                 + ": " + what);
   };
-  auto in_use = "in use (another process holds it exclusively)";
   unique_fd fd{::open(path.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC)};
   if (fd.get() < 0) {
     auto err = errno;
-    return fail(err == EBUSY ? std::string{in_use} : errno_text(err));
+    if (err == EBUSY)
+      return fail("busy: the tty is in exclusive mode (TIOCEXCL), set by "
+                  "another program, or left set by one that died while the "
+                  "line stayed open elsewhere (HERM does not set it)");
+    return fail(errno_text(err));
   }
   if (!::isatty(fd.get()))
     return fail("not a terminal");
-  // Root may open a tty despite TIOCEXCL: ask whether somebody holds it.
-  int held = 0;
-  if (::ioctl(fd.get(), TIOCGEXCL, &held) == 0 && held != 0)
-    return fail(in_use);
-  // Among HERM drivers (root or not), an advisory lock says who has it.
+  // The lock says who has the line; it dies with its holder.
   if (::flock(fd.get(), (set->exclusive ? LOCK_EX : LOCK_SH) | LOCK_NB) != 0) {
     auto err = errno;
-    return fail(err == EWOULDBLOCK ? std::string{in_use}
-                                   : "cannot lock: " + errno_text(err));
+    if (err == EWOULDBLOCK)
+      return fail("in use" + lock_holder(fd.get())
+                  + " (another live process holds its lock"
+                  + (set->exclusive ? "" : " exclusively") + ")");
+    return fail("cannot lock: " + errno_text(err));
   }
-  if (set->exclusive && ::ioctl(fd.get(), TIOCEXCL) != 0)
-    return fail("cannot make exclusive (TIOCEXCL): " + errno_text(errno));
-  auto release_excl = [&] {
-    if (set->exclusive)
-      ::ioctl(fd.get(), TIOCNXCL);
-  };
   std::string what;
-  if (auto err = apply_termios(fd.get(), *set, what)) {
-    release_excl();
+  if (auto err = apply_termios(fd.get(), *set, what))
     return fail(what + ": " + errno_text(err));
-  }
   // Whatever arrived before the line was configured is noise.
   ::tcflush(fd.get(), TCIOFLUSH);
   unique_fd wake{::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)};
-  if (wake.get() < 0) {
-    release_excl();
+  if (wake.get() < 0)
     return fail("cannot create an eventfd: " + errno_text(errno));
-  }
   auto drv = std::make_shared<serial_driver>(std::move(*set), fd.get(),
                                              wake.get());
   fd.release();

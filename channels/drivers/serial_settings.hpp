@@ -19,11 +19,12 @@
 //   delay_coef, frame_overhead_bits   as for every profile
 //   framing    DATA PARITY STOP: 8N1 (default), 8E1, 8O1, 8N2, 8E2, 8O2
 //   flow       none (default), rtscts, xonxoff
-//   exclusive  true (default): nobody else may open the line while the
-//              driver holds it (TIOCEXCL, plus an flock that also stops root
-//              and other HERM drivers); false: other non-exclusive HERM
-//              drivers may share it. A line that another process holds
-//              exclusively is refused either way.
+//   exclusive  true (default): the driver holds flock(LOCK_EX) on the
+//              line, so no other HERM driver (or flock-aware serial tool)
+//              opens it; false: flock(LOCK_SH), shared with other
+//              non-exclusive drivers. A line another process holds is
+//              refused either way. The lock dies with its holder (also on
+//              SIGKILL); see serial.cpp for why TIOCEXCL is not used.
 
 #include <cstdint>
 #include <optional>

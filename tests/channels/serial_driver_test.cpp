@@ -19,7 +19,10 @@
 #include <dirent.h>
 #include <fcntl.h>
 #include <poll.h>
+#include <signal.h>
 #include <stdlib.h>
+#include <sys/ioctl.h>
+#include <sys/wait.h>
 #include <termios.h>
 #include <unistd.h>
 
@@ -1126,6 +1129,143 @@ TEST_F(serial_driver, non_exclusive_drivers_share_a_line_but_exclude_an_exclusiv
   auto res = open_serial(serial_config("three", cable->path_a()));
   ASSERT_FALSE(res);
   EXPECT_TRUE(is(res.error(), ec::device_unavailable)) << render(res.error());
+}
+
+/// A child process (fork, no exec: it only opens a driver) that holds the
+/// serial line at `path` until it is killed; it ends itself after
+/// wait_limit * 3 should its parent be gone.
+struct line_holder {
+  pid_t pid = -1;
+
+  line_holder() = default;
+  line_holder(const line_holder&) = delete;
+  line_holder& operator=(const line_holder&) = delete;
+
+  ~line_holder() {
+    kill_now();
+  }
+
+  /// Forks and waits until the child holds the line; false if it cannot.
+  testing::AssertionResult start(const std::string& path) {
+    int ready[2];
+    if (::pipe2(ready, O_CLOEXEC) != 0)
+      return testing::AssertionFailure() << "pipe: " << std::strerror(errno);
+    pid = ::fork();
+    if (pid < 0) {
+      ::close(ready[0]);
+      ::close(ready[1]);
+      return testing::AssertionFailure() << "fork: " << std::strerror(errno);
+    }
+    if (pid == 0) {
+      ::close(ready[0]);
+      ::alarm(std::chrono::duration_cast<std::chrono::seconds>(wait_limit)
+                .count()
+              * 3);
+      auto res = open_serial(serial_config("held", path));
+      char ok = res ? '1' : '0';
+      [[maybe_unused]] auto n = ::write(ready[1], &ok, 1);
+      for (;;)
+        ::pause(); // holds the driver (and its lock) until killed
+    }
+    ::close(ready[1]);
+    pollfd p{ready[0], POLLIN, 0};
+    char ok = 0;
+    auto polled = ::poll(&p, 1, static_cast<int>(std::chrono::milliseconds(
+                                                   wait_limit)
+                                                   .count()));
+    auto got = polled == 1 ? ::read(ready[0], &ok, 1) : 0;
+    ::close(ready[0]);
+    if (got != 1 || ok != '1')
+      return testing::AssertionFailure() << "the child could not open " << path;
+    return testing::AssertionSuccess();
+  }
+
+  /// SIGKILL, as a supervisor or the OOM killer would, and reaps the child.
+  void kill_now() {
+    if (pid <= 0)
+      return;
+    ::kill(pid, SIGKILL);
+    int status = 0;
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    pid = -1;
+  }
+};
+
+TEST_F(serial_driver, a_line_held_by_a_live_process_is_refused_naming_the_line_and_the_holder) {
+  test::pty_pair pty;
+  std::string error;
+  if (!test::open_pty(pty, error))
+    GTEST_SKIP() << "no pseudo-terminals: " << error;
+  // Only the master stays open, as with a relay or socat on the other side.
+  ::close(pty.slave);
+  pty.slave = -1;
+  {
+    line_holder holder;
+    ASSERT_TRUE(holder.start(pty.path));
+    for (auto excl : {"true", "false"}) {
+      auto res = open_serial(
+        serial_config("second", pty.path, {{"exclusive", excl}}));
+      ASSERT_FALSE(res) << "exclusive=" << excl;
+      auto text = render(res.error());
+      EXPECT_TRUE(is(res.error(), ec::device_unavailable)) << text;
+      EXPECT_NE(text.find("'second'"), std::string::npos) << text;
+      EXPECT_NE(text.find(pty.path), std::string::npos) << text;
+      EXPECT_NE(text.find("in use by process " + std::to_string(holder.pid)),
+                std::string::npos)
+        << text;
+    }
+  }
+  test::close_pty(pty);
+}
+
+TEST_F(serial_driver, a_line_whose_holder_was_killed_opens_again_at_once) {
+  test::pty_pair pty;
+  std::string error;
+  if (!test::open_pty(pty, error))
+    GTEST_SKIP() << "no pseudo-terminals: " << error;
+  ::close(pty.slave);
+  pty.slave = -1;
+  // Twice: the line is as good after a restart as before it.
+  for (int round = 0; round < 2; ++round) {
+    SCOPED_TRACE(round);
+    line_holder holder;
+    ASSERT_TRUE(holder.start(pty.path));
+    holder.kill_now();
+    station again;
+    ASSERT_TRUE(again.open("again", pty.path));
+    // And it works: a frame written by the driver reaches the master.
+    ASSERT_FALSE(again.send(bytes({0x42})));
+    auto wire = read_exactly(pty.master, encode_wire(bytes({0x42}), true).size() / 2);
+    EXPECT_EQ(to_hex(wire), encode_wire(bytes({0x42}), true));
+  }
+  test::close_pty(pty);
+}
+
+TEST_F(serial_driver, a_stale_exclusive_flag_left_on_the_tty_is_explained_or_ignored) {
+  // Older versions set TIOCEXCL, which the kernel keeps on a pty slave after
+  // its holder died as long as the master is open.
+  test::pty_pair pty;
+  std::string error;
+  if (!test::open_pty(pty, error))
+    GTEST_SKIP() << "no pseudo-terminals: " << error;
+  ASSERT_EQ(::ioctl(pty.slave, TIOCEXCL), 0) << std::strerror(errno);
+  ::close(pty.slave);
+  pty.slave = -1;
+  {
+    auto res = open_serial(serial_config("tty0", pty.path));
+    if (::geteuid() == 0) {
+      // Root may open it; nobody holds the lock, so the line is ours.
+      EXPECT_TRUE(res) << render(res.error());
+    } else {
+      // The kernel refuses the open itself; the error says why.
+      ASSERT_FALSE(res);
+      auto text = render(res.error());
+      EXPECT_NE(text.find(pty.path), std::string::npos) << text;
+      EXPECT_NE(text.find("TIOCEXCL"), std::string::npos) << text;
+    }
+  }
+  test::close_pty(pty);
 }
 
 // -- serial_driver: over the null-modem cable ------------------------------------------
