@@ -379,3 +379,152 @@ TEST_F(hostile_network, unfinished_fragments_from_many_senders_are_bounded) {
   ASSERT_FALSE(all.is_null());
   EXPECT_GT(sum_of(all, "rx_reassembly_dropped"), 0u) << all.dump();
 }
+
+// Neighbours: hellos from many source ports, each a different sender id,
+// and one port that restarts (a new instance) with every hello, which would
+// make a send its whole table each time. The neighbour table keeps its
+// bound; a's real neighbour stays.
+TEST_F(hostile_network, hello_storms_from_many_ports_and_instances_are_bounded) {
+  start();
+  std::vector<hostile_socket> xs;
+  for (int i = 0; i < 300; ++i) {
+    xs.emplace_back();
+    ASSERT_TRUE(xs.back().ok());
+  }
+  auto peak = under_attack([&] {
+    for (int round = 0; round < 3; ++round) {
+      for (size_t i = 0; i < xs.size(); ++i) {
+        xs[i].send(pa_, hello_frame(static_cast<module_id>(0x1000 + i),
+                                    0xFEED0000 + i, round, 200));
+        xs[i].drain();
+      }
+      std::this_thread::sleep_for(20ms);
+    }
+    hostile_socket restarter;
+    for (uint64_t i = 0; i < 2000; ++i) {
+      restarter.send(pa_, hello_frame(0x0777, 0xAB000000 + i, 1, 200));
+      if (i % 100 == 99) {
+        restarter.drain();
+        std::this_thread::sleep_for(5ms);
+      }
+    }
+  });
+  expect_survived(peak);
+}
+
+// Flooded control packets: claims, conflicts and seqno requests with fresh
+// ids (each new one is relayed to every neighbour once, so a relays them to
+// b: the flood caches must stay bounded and never drop a's own traffic).
+TEST_F(hostile_network, floods_of_claims_conflicts_and_seqno_requests_are_bounded) {
+  start();
+  hostile_socket x;
+  ASSERT_TRUE(x.ok());
+  x.send(pa_, hello_frame(0x66, 0x5EED, 1, 200));
+  auto peak = under_attack([&] {
+    for (uint32_t i = 0; i < 6000; ++i) {
+      byte_buffer packet;
+      switch (i % 3) {
+        case 0:
+          encode(claim{static_cast<module_id>(0x0100 + i), 0x1000000ull + i,
+                       0x2000000ull + i, 4},
+                 packet);
+          break;
+        case 1:
+          encode(conflict{static_cast<module_id>(0x0100 + i), 0x3000000ull + i,
+                          0x4000000ull + i, 0x5000000ull + i, 4},
+                 packet);
+          break;
+        case 2:
+          encode(seqno_request{0x66, static_cast<module_id>(0x0100 + i),
+                               static_cast<seqno_t>(i), 4},
+                 packet);
+          break;
+      }
+      x.send(pa_, single_frame(packet));
+      if (i % 200 == 199) {
+        x.send(pa_, hello_frame(0x66, 0x5EED, 1, 200));
+        x.drain();
+        std::this_thread::sleep_for(5ms);
+      }
+    }
+  });
+  expect_survived(peak);
+}
+
+// Application messages from forged module ids: flooded discovery queries
+// and broadcast garbage with fresh flood ids, requests and reliable
+// requests for random APO numbers with random request ids, subscriptions
+// and watches from thousands of "modules". Each table they would fill in
+// a's application support layer is bounded and counts what it refused.
+TEST_F(hostile_network, application_message_floods_from_forged_modules_are_bounded) {
+  start();
+  hostile_socket x;
+  ASSERT_TRUE(x.ok());
+  constexpr module_id fake = 0x66;
+  // A route back to the attacker, so that a answers it (and keeps state).
+  x.send(pa_, hello_frame(fake, 0x5EED, 1, 200));
+  std::this_thread::sleep_for(50ms);
+  x.send(pa_, self_update_frame(fake, 0x5EED));
+  std::mt19937_64 rng{1414};
+  auto peak = under_attack([&] {
+    for (uint32_t i = 0; i < 12000; ++i) {
+      auto src = static_cast<module_id>(0x0100 + (i % 0xF000));
+      switch (i % 8) {
+        case 0:
+          x.send(pa_, asl_frame(src, broadcast_module,
+                                asl_query{i, query_by::any, ""}, 0x10000 + i));
+          break;
+        case 1: {
+          byte_buffer garbage(200);
+          for (auto& b : garbage)
+            b = static_cast<uint8_t>(rng());
+          x.send(pa_, data_frame(src, broadcast_module, asl_protocol, garbage,
+                                 0x20000 + i));
+          break;
+        }
+        case 2:
+          x.send(pa_, asl_frame(fake, 0x21,
+                                asl_request{rng() | 1,
+                                            static_cast<uint32_t>(rng()),
+                                            byte_buffer(64, 0x5A)}));
+          break;
+        case 3:
+          x.send(pa_, asl_frame(src, 0x21,
+                                asl_reliable_request{rng() | 1,
+                                                     static_cast<uint32_t>(rng()),
+                                                     false,
+                                                     byte_buffer(64, 0x5A)}));
+          break;
+        case 4:
+          x.send(pa_, asl_frame(src, 0x21,
+                                asl_subscribe{"topic/" + std::to_string(i % 500),
+                                              3600000}));
+          break;
+        case 5:
+          x.send(pa_, asl_frame(src, 0x21,
+                                asl_watch{static_cast<uint32_t>(rng())}));
+          break;
+        case 6:
+          x.send(pa_, asl_frame(src, 0x21,
+                                asl_response{rng() | 1, true, byte_buffer(8, 1),
+                                             {}}));
+          break;
+        case 7:
+          x.send(pa_, asl_frame(src, broadcast_module,
+                                asl_advertise{"topic/" + std::to_string(i)},
+                                0x30000 + i));
+          break;
+      }
+      if (i % 200 == 199) {
+        x.send(pa_, hello_frame(fake, 0x5EED, 1, 200));
+        x.drain();
+        std::this_thread::sleep_for(5ms);
+      }
+    }
+  });
+  expect_survived(peak);
+  auto all = all_stats();
+  ASSERT_FALSE(all.is_null());
+  EXPECT_GT(sum_of(all, "rx_malformed"), 0u) << all.dump();
+  EXPECT_GT(sum_of(all, "rx_unexpected_response"), 0u) << all.dump();
+}

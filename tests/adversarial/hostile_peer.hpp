@@ -16,6 +16,7 @@
 #include <optional>
 #include <vector>
 
+#include "actors/asl_wire.hpp"
 #include "channels/messages.hpp"
 #include "routing/wire.hpp"
 
@@ -139,6 +140,47 @@ inline byte_buffer update_frame(module_id sender, uint64_t instance,
   byte_buffer packet;
   encode(u, packet);
   return single_frame(packet);
+}
+
+/// An update in which `sender` advertises itself (origin = sender, no
+/// hops): the receiver then has a route back to it and answers it.
+inline byte_buffer self_update_frame(module_id sender, uint64_t instance,
+                                     uint16_t seqno = 1) {
+  update u;
+  u.sender = sender;
+  u.instance = instance;
+  advertised a;
+  a.origin = sender;
+  a.seqno = seqno;
+  a.metrics.fill(0);
+  u.entries.push_back(std::move(a));
+  byte_buffer packet;
+  encode(u, packet);
+  return single_frame(packet);
+}
+
+/// A data packet from `src` to `dst` (a flooded broadcast when dst is
+/// broadcast_module and flood_id is not 0) carrying `payload`.
+inline byte_buffer data_frame(module_id src, module_id dst, uint8_t protocol,
+                              const byte_buffer& payload,
+                              uint32_t flood_id = 0) {
+  data_header h;
+  h.src = src;
+  h.dst = dst;
+  h.protocol = protocol;
+  h.flood_id = flood_id;
+  byte_buffer packet;
+  encode(h, packet);
+  packet.insert(packet.end(), payload.begin(), payload.end());
+  return single_frame(packet);
+}
+
+/// An APO message from `src` to `dst` (docs/protocol.md, "APO messages").
+inline byte_buffer asl_frame(module_id src, module_id dst,
+                             const asl_message& msg, uint32_t flood_id = 0) {
+  byte_buffer payload;
+  encode(msg, payload);
+  return data_frame(src, dst, asl_protocol, payload, flood_id);
 }
 
 } // namespace herm::test
