@@ -20,7 +20,9 @@ namespace herm {
 
 namespace {
 
-/// At most this many peers are remembered for channel_info::peers.
+/// At most this many peers are remembered for channel_info::peers (and
+/// announced with peer_heard); frames of others are still processed and
+/// counted in channel_stats::rx_peers_unrecorded.
 constexpr size_t max_known_peers = 1024;
 
 /// Bounds on frames waiting while the driver's transmit queue is full: half
@@ -42,6 +44,7 @@ struct channel_state {
   channel_info info;
   link_driver_ptr driver;
   std::shared_ptr<device_counters> counters;
+  std::shared_ptr<rx_queue_account> rx_queue;
   link_addr peer = broadcast_addr;
   std::unique_ptr<packet_port> port;
   std::vector<channel_reader_actor> readers;
@@ -228,6 +231,7 @@ channel_actor::behavior_type channel_fun(channel_impl self,
   init.info = std::move(setup.info);
   init.driver = std::move(setup.driver);
   init.counters = std::move(setup.counters);
+  init.rx_queue = std::move(setup.rx_queue);
   init.peer = setup.peer;
   init.port = std::move(*port);
   init.info.max_packet = init.port->max_packet();
@@ -324,6 +328,8 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       auto result = st.stats;
       st.port->add_stats(result);
       result.rx_malformed += st.counters->malformed.load() + st.rx_bad_bundles;
+      result.rx_kernel_dropped = st.counters->kernel_dropped.load();
+      result.rx_queue_dropped = st.rx_queue->dropped();
       auto& bl = st.backlog.stats();
       uint64_t* overload[] = {&result.tx_overload_control,
                               &result.tx_overload_high,
@@ -366,10 +372,17 @@ channel_actor::behavior_type channel_fun(channel_impl self,
     [self](frame_received& msg) {
       settle(self);
       auto& st = self->state;
+      st.rx_queue->release(msg.bytes.size());
       ++st.stats.rx_frames;
-      if (st.peers.size() < max_known_peers && st.peers.insert(msg.src).second)
-        publish(self, link_event{0, static_cast<uint8_t>(link_event_kind::peer_heard),
-                                 msg.src, st.driver->format_addr(msg.src)});
+      if (st.peers.size() < max_known_peers) {
+        if (st.peers.insert(msg.src).second)
+          publish(self,
+                  link_event{0,
+                             static_cast<uint8_t>(link_event_kind::peer_heard),
+                             msg.src, st.driver->format_addr(msg.src)});
+      } else if (st.peers.count(msg.src) == 0) {
+        ++st.stats.rx_peers_unrecorded;
+      }
       if (st.bundling && !msg.bytes.empty()
           && msg.bytes[0] == bundle_header) {
         auto ok = bundle_decode(msg.bytes.data(), msg.bytes.size(),

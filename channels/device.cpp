@@ -34,12 +34,15 @@ public:
 
   void on_frame_in_lane(link_addr src, uint8_t lane, const uint8_t* data,
                         size_t size) override {
-    auto target = lookup(src);
-    if (!target) {
+    auto to = lookup(src);
+    if (!to.ch) {
       ++counters_->unclaimed;
       return;
     }
-    caf::anon_send(target,
+    // The channel releases the charge when it takes the frame.
+    if (!to.queue->charge(size))
+      return;
+    caf::anon_send(to.ch,
                    frame_received{src, byte_buffer(data, data + size), lane});
   }
 
@@ -47,16 +50,20 @@ public:
     ++counters_->malformed;
   }
 
+  void on_kernel_drops(uint64_t count) override {
+    counters_->kernel_dropped += count;
+  }
+
   void on_event(link_event_kind kind, link_addr peer,
                 std::string detail) override {
     std::vector<channel_actor> targets;
     {
       std::lock_guard<std::mutex> guard{mtx_};
-      if (wildcard_)
-        targets.push_back(wildcard_);
+      if (wildcard_.ch)
+        targets.push_back(wildcard_.ch);
       for (auto& kv : by_peer_)
         if (peer == 0 || kv.first == peer)
-          targets.push_back(kv.second);
+          targets.push_back(kv.second.ch);
     }
     for (auto& t : targets)
       caf::anon_send(t, link_event{0, static_cast<uint8_t>(kind), peer, detail});
@@ -78,20 +85,21 @@ public:
       caf::anon_send(device_, device_failed{std::move(failure_)});
   }
 
-  void add(link_addr peer, channel_actor ch) {
+  void add(link_addr peer, channel_actor ch,
+           std::shared_ptr<rx_queue_account> queue) {
     std::lock_guard<std::mutex> guard{mtx_};
     if (peer == broadcast_addr)
-      wildcard_ = std::move(ch);
+      wildcard_ = target{std::move(ch), std::move(queue)};
     else
-      by_peer_[peer] = std::move(ch);
+      by_peer_[peer] = target{std::move(ch), std::move(queue)};
   }
 
   void remove(const caf::actor_addr& addr) {
     std::lock_guard<std::mutex> guard{mtx_};
-    if (wildcard_ && wildcard_.address() == addr)
-      wildcard_ = nullptr;
+    if (wildcard_.ch && wildcard_.ch.address() == addr)
+      wildcard_ = target{};
     for (auto i = by_peer_.begin(); i != by_peer_.end(); ++i)
-      if (i->second.address() == addr) {
+      if (i->second.ch.address() == addr) {
         by_peer_.erase(i);
         break;
       }
@@ -99,19 +107,25 @@ public:
 
   bool taken(link_addr peer) {
     std::lock_guard<std::mutex> guard{mtx_};
-    return peer == broadcast_addr ? static_cast<bool>(wildcard_)
+    return peer == broadcast_addr ? static_cast<bool>(wildcard_.ch)
                                   : by_peer_.count(peer) > 0;
   }
 
   void clear() {
     std::lock_guard<std::mutex> guard{mtx_};
-    wildcard_ = nullptr;
+    wildcard_ = target{};
     by_peer_.clear();
     device_ = nullptr;
   }
 
 private:
-  channel_actor lookup(link_addr src) {
+  /// A channel and its inbound queue.
+  struct target {
+    channel_actor ch;
+    std::shared_ptr<rx_queue_account> queue;
+  };
+
+  target lookup(link_addr src) {
     std::lock_guard<std::mutex> guard{mtx_};
     if (!by_peer_.empty()) {
       auto i = by_peer_.find(src);
@@ -123,8 +137,8 @@ private:
 
   std::shared_ptr<device_counters> counters_;
   std::mutex mtx_;
-  channel_actor wildcard_;
-  std::map<link_addr, channel_actor> by_peer_;
+  target wildcard_;
+  std::map<link_addr, target> by_peer_;
   device_actor device_;
   caf::error failure_;
 };
@@ -207,10 +221,11 @@ device_fun(device_impl self, device_config cfg, link_driver_ptr driver,
       setup.counters = st.counters;
       setup.peer = peer;
       setup.device = self;
+      auto queue = setup.rx_queue;
       auto ch = spawn_channel(self->system(), std::move(setup));
       self->monitor(ch);
       st.channels.emplace(ch.address(), ch);
-      st.frames->add(peer, ch);
+      st.frames->add(peer, ch, std::move(queue));
       return {ch, info};
     },
     [self](atom::get, atom::info) -> device_info {

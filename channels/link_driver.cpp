@@ -16,6 +16,10 @@ void frame_handler::on_frame_in_lane(link_addr src, uint8_t, const uint8_t* data
   on_frame(src, data, size);
 }
 
+void frame_handler::on_kernel_drops(uint64_t) {
+  // nop
+}
+
 link_driver::~link_driver() = default;
 
 uint8_t link_driver::lane(link_addr, uint8_t) const {

@@ -49,6 +49,11 @@ public:
   /// medium header). It is dropped; the handler counts it.
   virtual void on_malformed(link_addr src, const char* why) = 0;
 
+  /// The kernel dropped `count` frames for this device because its receive
+  /// buffer was full (SO_RXQ_OVFL), since the previous call. Default:
+  /// nothing, for handlers that do not count them.
+  virtual void on_kernel_drops(uint64_t count);
+
   /// Something else happened on the link (error frame, bus-off, ...).
   virtual void on_event(link_event_kind kind, link_addr peer,
                         std::string detail) = 0;

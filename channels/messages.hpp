@@ -208,7 +208,7 @@ struct channel_stats {
   /// Packets dropped during reassembly: timed out, memory bound exceeded,
   /// checksum mismatch, or a new packet reused an incomplete packet's tag.
   uint64_t rx_reassembly_dropped = 0;
-  /// Duplicate or orphan fragments ignored.
+  /// Duplicate fragments ignored (the packet had that fragment already).
   uint64_t rx_duplicates = 0;
   /// Packets lost to overload (the transmit backlog was full), by priority:
   /// refused on arrival or evicted for a more urgent packet. Included in
@@ -225,6 +225,20 @@ struct channel_stats {
   /// packets (counted in tx_packets / rx_packets too).
   uint64_t tx_bundles = 0;
   uint64_t rx_bundles = 0;
+  /// Orphan fragments ignored: consecutive fragments of a packet whose
+  /// first fragment never arrived or was dropped already.
+  uint64_t rx_orphans = 0;
+  /// Frames the kernel dropped because the device's receive buffer was full
+  /// (SO_RXQ_OVFL on udp and can sockets), before the driver saw them. A
+  /// device-wide count: every channel of the device reports it.
+  uint64_t rx_kernel_dropped = 0;
+  /// Frames dropped because this channel's inbound queue (frames the driver
+  /// received that the channel has not processed yet) held its bound.
+  uint64_t rx_queue_dropped = 0;
+  /// Frames from peers not remembered in channel_info::peers (nor
+  /// announced with a peer_heard event) because the channel knew its
+  /// maximum number of peers (1024) already. The frames are processed.
+  uint64_t rx_peers_unrecorded = 0;
 };
 
 template <class Inspector>
@@ -235,7 +249,8 @@ typename Inspector::result_type inspect(Inspector& f, channel_stats& x) {
            x.rx_duplicates, x.tx_overload_control, x.tx_overload_high,
            x.tx_overload_normal, x.tx_overload_bulk, x.backlog_bytes,
            x.backlog_peak_bytes, x.backlog_limit_bytes, x.tx_bundles,
-           x.rx_bundles);
+           x.rx_bundles, x.rx_orphans, x.rx_kernel_dropped,
+           x.rx_queue_dropped, x.rx_peers_unrecorded);
 }
 
 } // namespace herm

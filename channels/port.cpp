@@ -145,7 +145,8 @@ void fragmenting_port::add_stats(channel_stats& st) const {
   inner_->add_stats(st);
   auto& rs = reassembler_.stats();
   st.rx_malformed += rs.malformed;
-  st.rx_duplicates += rs.duplicates + rs.orphans;
+  st.rx_duplicates += rs.duplicates;
+  st.rx_orphans += rs.orphans;
   st.rx_reassembly_dropped += rs.timed_out + rs.over_limit + rs.bad_checksum
                               + rs.superseded;
 }

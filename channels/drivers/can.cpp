@@ -576,6 +576,13 @@ public:
                   std::string{"cannot set "} + what + " on '" + ifname
                     + "': " + errno_text(errno));
     };
+    // Count what a full receive buffer drops, as candump does.
+    int one = 1;
+    if (::setsockopt(fd_.get(), SOL_SOCKET, SO_RXQ_OVFL, &one, sizeof(one))
+        != 0)
+      return fail(ec::device_unavailable,
+                  "cannot enable SO_RXQ_OVFL on '" + ifname
+                    + "': " + errno_text(errno));
     int off = 0;
     if (auto err = set(CAN_RAW_RECV_OWN_MSGS, &off, sizeof(off),
                        "CAN_RAW_RECV_OWN_MSGS"))
@@ -701,6 +708,8 @@ public:
       return std::to_string(if_mtu_);
     if (key == "backend")
       return std::string{"socketcan"};
+    if (key == "rx_kernel_dropped")
+      return std::to_string(kernel_dropped_.load());
     return can_driver::get_param(key);
   }
 
@@ -767,7 +776,18 @@ private:
       if ((ev & POLLIN) == 0)
         continue;
       for (int i = 0; i < max_reads_per_wakeup && !stopping_.load(); ++i) {
-        auto n = ::recv(fd_.get(), &frame, sizeof(frame), MSG_DONTWAIT);
+        // SO_RXQ_OVFL: the socket's drop count (cumulative, modulo 2^32)
+        // rides on frames received after drops happened.
+        alignas(cmsghdr) char control[CMSG_SPACE(sizeof(uint32_t))];
+        iovec iov{&frame, sizeof(frame)};
+        msghdr msg{};
+        msg.msg_iov = &iov;
+        msg.msg_iovlen = 1;
+        msg.msg_control = control;
+        msg.msg_controllen = sizeof(control);
+        auto n = ::recvmsg(fd_.get(), &msg, MSG_DONTWAIT);
+        if (n >= 0)
+          note_drops(msg);
         if (n < 0) {
           auto err = errno;
           if (err == EINTR)
@@ -782,8 +802,29 @@ private:
     }
   }
 
+  /// Reports what the kernel dropped since the last frame that told us.
+  void note_drops(msghdr& msg) {
+    for (auto* c = CMSG_FIRSTHDR(&msg); c != nullptr;
+         c = CMSG_NXTHDR(&msg, c)) {
+      if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SO_RXQ_OVFL
+          || c->cmsg_len < CMSG_LEN(sizeof(uint32_t)))
+        continue;
+      uint32_t total;
+      std::memcpy(&total, CMSG_DATA(c), sizeof(total));
+      auto delta = static_cast<uint32_t>(total - drops_seen_);
+      drops_seen_ = total;
+      if (delta > 0) {
+        kernel_dropped_ += delta;
+        handler_->on_kernel_drops(delta);
+      }
+    }
+  }
+
   unsigned ifindex_ = 0;
   int if_mtu_ = 0;
+  /// The kernel's drop count as last reported (receive thread only).
+  uint32_t drops_seen_ = 0;
+  std::atomic<uint64_t> kernel_dropped_{0};
 
   /// Guards closing fd_ against concurrent send() calls.
   mutable std::shared_mutex fd_mtx_;

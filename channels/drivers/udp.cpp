@@ -11,7 +11,10 @@
 // with recvmmsg into buffers allocated once in start(), and calls the
 // handler. Datagrams from our own port and one of this host's (namespace's)
 // IPv4 addresses, snapshotted by getifaddrs in start(), are our own
-// broadcasts looped back by the kernel and are ignored.
+// broadcasts looped back by the kernel and are ignored. Datagrams the kernel
+// dropped because the receive buffer was full are counted through
+// SO_RXQ_OVFL (the drop count rides on the next datagram received) and
+// reported with frame_handler::on_kernel_drops.
 
 #include <ifaddrs.h>
 #include <net/if.h>
@@ -54,6 +57,9 @@ constexpr size_t max_batch = 32;
 
 /// Upper bound of the preallocated receive memory (batch * MTU) in bytes.
 constexpr size_t max_rx_memory = size_t{1} << 20;
+
+/// Ancillary data per datagram: the SO_RXQ_OVFL drop count (uint32_t).
+constexpr size_t rx_control_size = CMSG_SPACE(sizeof(uint32_t));
 
 /// Errors a UDP socket reports for something a peer or the path did (ICMP
 /// unreachable, a signal); the socket itself is fine.
@@ -111,12 +117,16 @@ public:
     msgs_.assign(batch_, mmsghdr{});
     iovs_.assign(batch_, iovec{});
     names_.assign(batch_, sockaddr_in{});
+    // uint64_t storage keeps every cmsghdr aligned.
+    controls_.assign(batch_ * (rx_control_size / sizeof(uint64_t) + 1), 0);
     for (size_t i = 0; i < batch_; ++i) {
       iovs_[i].iov_base = buffers_.data() + i * mtu;
       iovs_[i].iov_len = mtu;
       msgs_[i].msg_hdr.msg_iov = &iovs_[i];
       msgs_[i].msg_hdr.msg_iovlen = 1;
       msgs_[i].msg_hdr.msg_name = &names_[i];
+      msgs_[i].msg_hdr.msg_control
+        = controls_.data() + i * (rx_control_size / sizeof(uint64_t) + 1);
     }
     handler_ = std::move(handler);
     try {
@@ -215,6 +225,8 @@ public:
     }
     if (key == "broadcast")
       return cfg_.broadcast ? udp::format_addr(*cfg_.broadcast) : "";
+    if (key == "rx_kernel_dropped")
+      return std::to_string(kernel_dropped_.load());
     return link_driver::get_param(key);
   }
 
@@ -329,6 +341,7 @@ private:
       for (size_t i = 0; i < batch_; ++i) {
         msgs_[i].msg_hdr.msg_namelen = sizeof(sockaddr_in);
         msgs_[i].msg_hdr.msg_flags = 0;
+        msgs_[i].msg_hdr.msg_controllen = rx_control_size;
         msgs_[i].msg_len = 0;
       }
       // MSG_TRUNC: msg_len is the datagram's real length even when larger
@@ -347,6 +360,7 @@ private:
       for (int i = 0; i < n && !stopping_; ++i) {
         auto& msg = msgs_[static_cast<size_t>(i)];
         auto& name = names_[static_cast<size_t>(i)];
+        note_drops(msg.msg_hdr);
         if (is_own(name))
           continue;
         auto src = udp::from_sockaddr(name);
@@ -364,6 +378,26 @@ private:
         return true;
     }
     return true;
+  }
+
+  /// Reports what the kernel dropped since the last datagram that told us.
+  /// SO_RXQ_OVFL attaches the socket's drop count (cumulative, modulo
+  /// 2^32) to a datagram once drops have happened.
+  void note_drops(const msghdr& hdr) {
+    for (auto* c = CMSG_FIRSTHDR(&hdr); c != nullptr;
+         c = CMSG_NXTHDR(const_cast<msghdr*>(&hdr), c)) {
+      if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SO_RXQ_OVFL
+          || c->cmsg_len < CMSG_LEN(sizeof(uint32_t)))
+        continue;
+      uint32_t total;
+      std::memcpy(&total, CMSG_DATA(c), sizeof(total));
+      auto delta = static_cast<uint32_t>(total - drops_seen_);
+      drops_seen_ = total;
+      if (delta > 0) {
+        kernel_dropped_ += delta;
+        handler_->on_kernel_drops(delta);
+      }
+    }
   }
 
   // -- state -------------------------------------------------------------------
@@ -390,6 +424,10 @@ private:
   std::vector<mmsghdr> msgs_;
   std::vector<iovec> iovs_;
   std::vector<sockaddr_in> names_;
+  std::vector<uint64_t> controls_;
+  /// The kernel's drop count as last reported (SO_RXQ_OVFL).
+  uint32_t drops_seen_ = 0;
+  std::atomic<uint64_t> kernel_dropped_{0};
 };
 
 // -- open ----------------------------------------------------------------------
@@ -483,6 +521,11 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
     return fail(ec::device_unavailable,
                 "cannot create a UDP socket: " + errno_text(errno));
   int one = 1;
+  // Count what a full receive buffer drops (Linux 2.6.33 and later).
+  if (::setsockopt(sock.get(), SOL_SOCKET, SO_RXQ_OVFL, &one, sizeof(one))
+      != 0)
+    return fail(ec::device_unavailable,
+                "cannot enable SO_RXQ_OVFL: " + errno_text(errno));
   if (set.broadcast
       && ::setsockopt(sock.get(), SOL_SOCKET, SO_BROADCAST, &one, sizeof(one))
            != 0)

@@ -7,6 +7,7 @@
 #include "tests/support/actor_fixture.hpp"
 #include "tests/support/null_frame_handler.hpp"
 
+#include "channels/channel.hpp"
 #include "channels/drivers/inproc.hpp"
 #include "channels/fragmentation.hpp"
 #include "channels/io_manager.hpp"
@@ -446,4 +447,100 @@ TEST_F(nil_test, a_local_channel_is_not_announced_to_listeners) {
   ASSERT_TRUE(closed);
   run();
   EXPECT_TRUE(log->downs.empty());
+}
+
+// -- bounds on what the network can make a channel hold ----------------------------
+
+// The driver hands frames to the channel from its own thread; a flood faster
+// than the channel (here: the channel does not run at all until run())
+// meets the inbound queue's bound, and the excess is dropped and counted.
+TEST_F(nil_test, a_flood_faster_than_the_channel_stops_at_its_inbound_queue_bound_and_is_counted) {
+  auto b = make_module(2);
+  auto [probe, log] = spawn_probe();
+  subscribe(b.ch, probe);
+  auto raw = raw_station(7, "ethernet");
+  byte_buffer frame{0x00}; // a single-frame packet
+  auto body = pattern(1399);
+  frame.insert(frame.end(), body.begin(), body.end());
+  auto fits = default_rx_queue_bytes / (frame.size() + rx_queue_frame_overhead);
+  const size_t excess = 100;
+  for (size_t i = 0; i < fits + excess; ++i)
+    ASSERT_FALSE(raw->send(2, frame.data(), frame.size(), prio_normal));
+  run();
+  auto st = stats(b.ch);
+  EXPECT_EQ(st.rx_frames, fits);
+  EXPECT_EQ(st.rx_queue_dropped, excess);
+  EXPECT_EQ(log->packets.size(), fits);
+  // Processed frames are credited back: the queue takes frames again.
+  ASSERT_FALSE(raw->send(2, frame.data(), frame.size(), prio_normal));
+  run();
+  st = stats(b.ch);
+  EXPECT_EQ(st.rx_frames, fits + 1);
+  EXPECT_EQ(st.rx_queue_dropped, excess);
+  EXPECT_EQ(log->packets.size(), fits + 1);
+}
+
+// A channel remembers at most 1024 peers (channel_info::peers, peer_heard
+// events); frames of further peers are still delivered, and counted.
+TEST_F(nil_test, frames_from_more_peers_than_a_channel_remembers_are_delivered_and_counted) {
+  auto b = make_module(2);
+  auto [probe, log] = spawn_probe();
+  subscribe(b.ch, probe);
+  const size_t remembered = 1024;
+  const size_t extra = 6;
+  const uint8_t single[] = {0x00, 'h', 'i'};
+  for (size_t i = 0; i < remembered + extra; ++i) {
+    auto raw = raw_station(static_cast<uint16_t>(10 + i), "ethernet");
+    ASSERT_FALSE(raw->send(2, single, sizeof(single), prio_normal));
+    raw->stop();
+    run();
+  }
+  auto st = stats(b.ch);
+  EXPECT_EQ(st.rx_packets, remembered + extra);
+  EXPECT_EQ(st.rx_peers_unrecorded, extra);
+  size_t heard = 0;
+  for (auto& ev : log->events)
+    heard += ev.kind == static_cast<uint8_t>(link_event_kind::peer_heard);
+  EXPECT_EQ(heard, remembered);
+  auto info = call<channel_info>(b.ch, atom::get_v, atom::info_v);
+  ASSERT_TRUE(info);
+  EXPECT_EQ(std::get<0>(*info).peers.size(), remembered);
+}
+
+// Orphans (a consecutive fragment whose first never came) and duplicates
+// (a fragment the packet already has) are counted each under its own name.
+TEST_F(nil_test, orphan_and_duplicate_fragments_are_counted_apart) {
+  auto b = make_module(2, "can2.0");
+  auto [probe, log] = spawn_probe();
+  subscribe(b.ch, probe);
+  auto raw = raw_station(7, "can2.0");
+  fragmenter f{8};
+  auto payload = pattern(40);
+  std::vector<byte_buffer> frames;
+  f.split(payload.data(), payload.size(), [&](const uint8_t* p, size_t n) {
+    frames.emplace_back(p, p + n);
+  });
+  ASSERT_GT(frames.size(), 3u);
+  // An orphan: the second fragment alone, held until the timeout.
+  raw->send(2, frames[1].data(), frames[1].size(), prio_normal);
+  run();
+  advance(reassembly_limits{}.timeout + 100ms);
+  auto st = stats(b.ch);
+  EXPECT_EQ(st.rx_orphans, 1u);
+  EXPECT_EQ(st.rx_duplicates, 0u);
+  // A duplicate: the next packet's first fragment twice.
+  f.split(payload.data(), payload.size(), [&](const uint8_t* p, size_t n) {
+    frames.emplace_back(p, p + n);
+  });
+  auto second = frames.size() / 2;
+  raw->send(2, frames[second].data(), frames[second].size(), prio_normal);
+  raw->send(2, frames[second].data(), frames[second].size(), prio_normal);
+  for (auto i = second + 1; i < frames.size(); ++i)
+    raw->send(2, frames[i].data(), frames[i].size(), prio_normal);
+  run();
+  st = stats(b.ch);
+  EXPECT_EQ(st.rx_duplicates, 1u);
+  EXPECT_EQ(st.rx_orphans, 1u);
+  ASSERT_EQ(log->packets.size(), 1u);
+  EXPECT_EQ(log->packets[0].bytes, payload);
 }

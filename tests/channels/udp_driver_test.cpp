@@ -1205,6 +1205,110 @@ TEST(udp_driver, refuses_a_second_start_and_a_missing_handler) {
 
 // -- several processes -----------------------------------------------------------
 
+/// Holds its driver's receive thread in the first on_frame until opened,
+/// so that the socket's receive buffer fills; counts frames and the drops
+/// the driver reports.
+class gated_handler : public frame_handler {
+public:
+  void on_frame(link_addr, const uint8_t* data, size_t size) override {
+    std::unique_lock<std::mutex> guard{mtx_};
+    payloads_.emplace_back(data, data + size);
+    held_ = true;
+    cv_.notify_all();
+    cv_.wait_for(guard, wait_limit, [&] { return open_; });
+  }
+
+  void on_malformed(link_addr, const char*) override {
+  }
+
+  void on_kernel_drops(uint64_t count) override {
+    std::lock_guard<std::mutex> guard{mtx_};
+    drops_ += count;
+  }
+
+  void on_event(link_event_kind, link_addr, std::string) override {
+  }
+
+  void on_failure(caf::error) override {
+  }
+
+  /// Waits until the receive thread is held in on_frame.
+  bool wait_held() {
+    std::unique_lock<std::mutex> guard{mtx_};
+    return cv_.wait_for(guard, wait_limit, [&] { return held_; });
+  }
+
+  void open() {
+    std::lock_guard<std::mutex> guard{mtx_};
+    open_ = true;
+    cv_.notify_all();
+  }
+
+  /// Waits (at most `limit`) until a frame with these bytes arrived.
+  bool wait_for(const byte_buffer& payload, std::chrono::milliseconds limit) {
+    std::unique_lock<std::mutex> guard{mtx_};
+    return cv_.wait_for(guard, limit, [&] {
+      return std::find(payloads_.begin(), payloads_.end(), payload)
+             != payloads_.end();
+    });
+  }
+
+  size_t frames() {
+    std::lock_guard<std::mutex> guard{mtx_};
+    return payloads_.size();
+  }
+
+  uint64_t drops() {
+    std::lock_guard<std::mutex> guard{mtx_};
+    return drops_;
+  }
+
+private:
+  std::mutex mtx_;
+  std::condition_variable cv_;
+  std::vector<byte_buffer> payloads_;
+  uint64_t drops_ = 0;
+  bool held_ = false;
+  bool open_ = false;
+};
+
+TEST(udp_driver, counts_datagrams_the_kernel_dropped_for_a_full_receive_buffer) {
+  station a;
+  ASSERT_EQ(start_station(a, udp_config("a", "127.0.0.1:0")), "");
+  auto drv = open_udp(udp_config("b", "127.0.0.1:0", {{"rcvbuf", "1024"}}));
+  ASSERT_TRUE(drv) << render(drv.error());
+  auto handler = std::make_shared<gated_handler>();
+  ASSERT_FALSE((*drv)->start(handler));
+  auto to = (*drv)->local_addr();
+  size_t sent = 0;
+  auto send = [&](const byte_buffer& x) {
+    ASSERT_EQ(render(send_bytes(*a.drv, to, x)), "none");
+    ++sent;
+  };
+  send(pattern(200, 1));
+  ASSERT_TRUE(handler->wait_held());
+  // The buffer (the kernel's minimum, a few datagrams) overflows.
+  for (int i = 0; i < 200; ++i)
+    send(pattern(200, 2));
+  handler->open();
+  // A later datagram carries the drop count; markers until one arrives
+  // (one sent while the buffer is still full may be dropped itself).
+  bool marked = false;
+  for (uint8_t k = 0; k < 50 && !marked; ++k) {
+    auto marker = bytes_of("marker");
+    marker.push_back(k);
+    send(marker);
+    marked = handler->wait_for(marker, 200ms);
+  }
+  ASSERT_TRUE(marked);
+  (*drv)->stop();
+  EXPECT_GT(handler->drops(), 0u);
+  EXPECT_EQ(handler->frames() + handler->drops(), sent);
+  auto param = (*drv)->get_param("rx_kernel_dropped");
+  ASSERT_TRUE(param);
+  EXPECT_EQ(*param, std::to_string(handler->drops()));
+}
+
 TEST(udp_driver_processes, a_driver_in_a_child_process_echoes_every_frame) {
   agent child;
   ASSERT_EQ(child.spawn("", udp_config("echo0", "127.0.0.1:0"), true),
