@@ -4,12 +4,14 @@
 
 #include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <initializer_list>
 #include <sstream>
 #include <utility>
+#include <vector>
 
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
@@ -525,6 +527,157 @@ private:
   const std::string& file_;
 };
 
+// -- expansion bound -------------------------------------------------------------
+
+/// Most a document may expand to, bytes: scalars' text plus node_cost per
+/// node, every alias counted as a full copy of what it refers to (that is
+/// what walking the document reads, and what copying values into a
+/// file_config allocates). A 1 MiB file without aliases stays far below;
+/// an alias bomb (a large string or a nested list repeated through
+/// aliases) is refused before the document is built or walked.
+constexpr uint64_t max_expanded_bytes = 8 * 1024 * 1024;
+
+/// What one node counts for on top of its text.
+constexpr uint64_t node_cost = 8;
+
+/// Measures the expanded size of one YAML document from the parser's
+/// events, in memory proportional to the file (one size per anchor, one
+/// level per nesting depth), and fails with the line and field of the node
+/// that crosses max_expanded_bytes, or of an alias inside the node it
+/// refers to (a cycle, which no walk would finish).
+class expansion_meter : public YAML::EventHandler {
+public:
+  explicit expansion_meter(const parser& p) : parser_(p) {
+    // nop
+  }
+
+  void OnDocumentStart(const YAML::Mark&) override {
+  }
+
+  void OnDocumentEnd() override {
+  }
+
+  void OnNull(const YAML::Mark& mark, YAML::anchor_t anchor) override {
+    leaf(mark, anchor, nullptr, node_cost);
+  }
+
+  void OnScalar(const YAML::Mark& mark, const std::string&,
+                YAML::anchor_t anchor, const std::string& value) override {
+    leaf(mark, anchor, &value, node_cost + value.size());
+  }
+
+  void OnAlias(const YAML::Mark& mark, YAML::anchor_t anchor) override {
+    auto path = place(nullptr);
+    if (anchor >= sizes_.size() || sizes_[anchor] == unknown)
+      parser_.fail(mark.line + 1, path,
+                   "alias inside the node it refers to (a cycle)");
+    add(mark, path, sizes_[anchor]);
+  }
+
+  void OnSequenceStart(const YAML::Mark& mark, const std::string&,
+                       YAML::anchor_t anchor,
+                       YAML::EmitterStyle::value) override {
+    open(mark, anchor, false);
+  }
+
+  void OnSequenceEnd() override {
+    close();
+  }
+
+  void OnMapStart(const YAML::Mark& mark, const std::string&,
+                  YAML::anchor_t anchor, YAML::EmitterStyle::value) override {
+    open(mark, anchor, true);
+  }
+
+  void OnMapEnd() override {
+    close();
+  }
+
+private:
+  static constexpr uint64_t unknown = UINT64_MAX;
+
+  struct level {
+    bool map = false;
+    bool want_key = true;
+    std::string path;
+    std::string key;
+    size_t index = 0;
+    YAML::anchor_t anchor = YAML::NullAnchor;
+    uint64_t start = 0;
+  };
+
+  /// The field path of the node that starts now (as config errors write
+  /// it: a.b[2].c); advances the enclosing node's position.
+  std::string place(const std::string* scalar) {
+    if (levels_.empty())
+      return {};
+    auto& top = levels_.back();
+    auto join = [&](const std::string& key) {
+      return top.path.empty() ? key : top.path + "." + key;
+    };
+    if (!top.map)
+      return top.path + "[" + std::to_string(top.index++) + "]";
+    if (top.want_key) {
+      top.want_key = false;
+      top.key = scalar == nullptr ? "?" : scalar->substr(0, max_quoted);
+      return join(top.key);
+    }
+    top.want_key = true;
+    return join(top.key);
+  }
+
+  void add(const YAML::Mark& mark, const std::string& path, uint64_t cost) {
+    if (cost > max_expanded_bytes - total_)
+      parser_.fail(mark.line + 1, path,
+                   "the document expands to more than "
+                     + std::to_string(max_expanded_bytes / (1024 * 1024))
+                     + " MiB here (aliases repeat what they refer to)");
+    total_ += cost;
+  }
+
+  void define(YAML::anchor_t anchor, uint64_t size) {
+    if (anchor == YAML::NullAnchor)
+      return;
+    if (anchor >= sizes_.size())
+      sizes_.resize(anchor + 1, unknown);
+    sizes_[anchor] = size;
+  }
+
+  void leaf(const YAML::Mark& mark, YAML::anchor_t anchor,
+            const std::string* value, uint64_t cost) {
+    auto path = place(value);
+    add(mark, path, cost);
+    define(anchor, cost);
+  }
+
+  void open(const YAML::Mark& mark, YAML::anchor_t anchor, bool map) {
+    level next;
+    next.map = map;
+    next.path = place(nullptr);
+    next.anchor = anchor;
+    next.start = total_;
+    add(mark, next.path, node_cost);
+    if (anchor != YAML::NullAnchor) {
+      if (anchor >= sizes_.size())
+        sizes_.resize(anchor + 1, unknown);
+      sizes_[anchor] = unknown; // open: an alias to it is a cycle
+    }
+    levels_.push_back(std::move(next));
+  }
+
+  void close() {
+    if (levels_.empty())
+      return;
+    define(levels_.back().anchor, total_ - levels_.back().start);
+    levels_.pop_back();
+  }
+
+  const parser& parser_;
+  std::vector<level> levels_;
+  std::vector<uint64_t> sizes_; // by anchor; unknown while open
+  uint64_t total_ = 0;
+};
+
 /// Counts the nodes of one YAML document and remembers the first one's line.
 struct document_counter : YAML::EventHandler {
   size_t nodes = 0;
@@ -569,7 +722,8 @@ caf::expected<file_config> parse_config(const std::string& text,
     // documents through the event parser is bounded.
     std::istringstream in{text};
     YAML::Parser events{in};
-    document_counter first;
+    // Bounds the expansion before YAML::Load and the walk (alias bombs).
+    expansion_meter first{p};
     events.HandleNextDocument(first);
     document_counter second;
     if (events.HandleNextDocument(second) && second.nodes > 0)

@@ -17,6 +17,7 @@
 #include "actors/runtime/error.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/link_profile.hpp"
+#include "tests/support/process.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
@@ -743,7 +744,8 @@ const error_case error_cases[] = {
    "robot.yaml:2: the referenced anchor is not defined"},
   {"self_referencing_alias",
    channel_head + "    peers: &p [a, *p]\n",
-   "robot.yaml:7: channels[0].peers[1]: expected a scalar, got a list"},
+   "robot.yaml:7: channels[0].peers[1]: alias inside the node it refers to "
+   "(a cycle)"},
 };
 
 class config_errors : public testing::TestWithParam<error_case> {};
@@ -858,3 +860,146 @@ TEST(config, a_lone_comma_is_refused_not_looped_on) {
   EXPECT_NE(render(cfg.error()).find("robot.yaml:"), std::string::npos)
     << render(cfg.error());
 }
+
+// -- alias bombs -------------------------------------------------------------------
+
+namespace {
+
+/// One inproc channel whose option `big` is `size` x's anchored as &s,
+/// followed by `count` options a0, a1, ... each an alias of it, one a line.
+/// Line of option aK: 9 + K.
+std::string string_bomb(size_t size, size_t count) {
+  std::string text = lines({
+    "module: { name: m }",
+    "channels:",
+    "  - name: a",
+    "    kind: inproc",
+    "    interface: seg",
+  });
+  text += "    big: &s " + std::string(size, 'x') + "\n";
+  text += "    list: [1, 2]\n";
+  text += "    other: 3\n";
+  for (size_t i = 0; i < count; ++i)
+    text += "    a" + std::to_string(i) + ": *s\n";
+  return text;
+}
+
+/// "robot.yaml:L: channels[0].aK: ..." names the line of aK.
+void expect_names_an_alias_line(const std::string& context) {
+  auto colon = context.find(':', std::string{"robot.yaml:"}.size());
+  ASSERT_EQ(context.rfind("robot.yaml:", 0), 0u) << context;
+  ASSERT_NE(colon, std::string::npos) << context;
+  auto line = std::stoul(context.substr(11, colon - 11));
+  ASSERT_GE(line, 9u) << context;
+  EXPECT_NE(context.find(": channels[0].a" + std::to_string(line - 9) + ": "),
+            std::string::npos)
+    << context;
+}
+
+} // namespace
+
+// Found by an attacker's config: aliases of one large string in channel
+// options made parsing allocate every copy (std::bad_alloc, exit 134).
+TEST(config, refuses_aliases_of_a_large_string_naming_the_line_and_field) {
+  // 256 KiB repeated 100 times: 25 MiB if expanded.
+  auto context = parse_error(string_bomb(256 * 1024, 100));
+  EXPECT_NE(context.find("expands to more than 8 MiB"), std::string::npos)
+    << context.substr(0, 200);
+  expect_names_an_alias_line(context);
+}
+
+TEST(config, refuses_nested_aliases_that_multiply_before_building_them) {
+  // Ten levels of ten: 10^10 strings, from a file of a few hundred bytes.
+  std::string text = lines({
+    "module: { name: m }",
+    "channels:",
+    "  - name: a",
+    "    kind: inproc",
+    "    interface: seg",
+    "    l0: &l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]",
+  });
+  for (int i = 1; i < 10; ++i) {
+    auto prev = "*l" + std::to_string(i - 1);
+    text += "    l" + std::to_string(i) + ": &l" + std::to_string(i) + " [";
+    for (int k = 0; k < 10; ++k)
+      text += (k == 0 ? "" : ", ") + prev;
+    text += "]\n";
+  }
+  auto context = parse_error(text);
+  EXPECT_NE(context.find("expands to more than 8 MiB"), std::string::npos)
+    << context;
+  // Crossed inside one of the nested lists, named as a list element.
+  EXPECT_NE(context.find(": channels[0].l"), std::string::npos) << context;
+  EXPECT_NE(context.find("]: "), std::string::npos) << context;
+}
+
+TEST(config, refuses_an_alias_inside_the_node_it_refers_to) {
+  auto context = parse_error(lines({
+    "module: { name: m }",
+    "channels:",
+    "  - &c",
+    "    name: a",
+    "    kind: inproc",
+    "    interface: seg",
+    "    me: *c",
+  }));
+  EXPECT_NE(context.find("robot.yaml:7: channels[0].me: "), std::string::npos)
+    << context;
+  EXPECT_NE(context.find("cycle"), std::string::npos) << context;
+}
+
+TEST(config, accepts_aliases_whose_expansion_stays_within_the_bound) {
+  // 4 KiB repeated 100 times: 400 KiB expanded.
+  auto cfg = parse_ok(string_bomb(4 * 1024, 100));
+  ASSERT_EQ(cfg.module.devices.size(), 1u);
+  auto& opts = cfg.module.devices[0].options;
+  EXPECT_EQ(opts.at("a99"), std::string(4 * 1024, 'x'));
+  EXPECT_EQ(opts.size(), 103u);
+}
+
+TEST(config, a_file_of_the_largest_size_without_aliases_is_within_the_bound) {
+  // A list of one-character scalars: the most nodes 1 MiB can hold.
+  std::string text = "module: { name: m }\nx: [";
+  while (text.size() < 1024 * 1024 - 8)
+    text += "1,";
+  text += "1]\n";
+  auto context = parse_error(text);
+  // Refused for the unknown key, not for its size.
+  EXPECT_EQ(context.find("expands"), std::string::npos) << context.substr(0, 200);
+  EXPECT_NE(context.find("robot.yaml:2: x:"), std::string::npos)
+    << context.substr(0, 200);
+}
+
+TEST(config, load_config_refuses_an_alias_bomb_file_naming_it) {
+  temp_dir dir;
+  // Just under the 1 MiB file bound: 512 KiB and tens of thousands of aliases.
+  auto text = string_bomb(512 * 1024, 1);
+  while (text.size() < 1000 * 1024)
+    text += "    b" + std::to_string(text.size()) + ": *s\n";
+  auto file = dir.write("bomb.yaml", text);
+  auto cfg = load_config(file);
+  ASSERT_FALSE(cfg);
+  EXPECT_TRUE(is(cfg.error(), ec::invalid_config));
+  auto context = context_of(cfg.error());
+  EXPECT_EQ(context.rfind(file + ":", 0), 0u) << context.substr(0, 200);
+  EXPECT_NE(context.find("expands to more than 8 MiB"), std::string::npos)
+    << context.substr(0, 200);
+}
+
+#ifdef HERMD_BIN
+// What an operator sees: `hermd --check` exits 2 with file, line and field
+// (it aborted with std::bad_alloc, exit 134, before).
+TEST(config, hermd_check_refuses_an_alias_bomb_with_exit_code_2) {
+  temp_dir dir;
+  auto file = dir.write("bomb.yaml", string_bomb(256 * 1024, 100));
+  test::child_process hermd{{"/bin/sh", "-c",
+                             std::string{"exec '"} + HERMD_BIN + "' --check '"
+                               + file + "' 2>&1"}};
+  ASSERT_TRUE(hermd.started());
+  EXPECT_EQ(hermd.wait(std::chrono::seconds(30)), 2) << hermd.output();
+  auto& out = hermd.output();
+  EXPECT_NE(out.find(file + ":"), std::string::npos) << out;
+  EXPECT_NE(out.find(": channels[0].a"), std::string::npos) << out;
+  EXPECT_NE(out.find("expands to more than 8 MiB"), std::string::npos) << out;
+}
+#endif

@@ -195,6 +195,30 @@ def fragmentation():
           + bytes([0, 4, 3]) + h("85 01 02") + bytes([2, 0xD0, 0x07]))
 
 
+def alias_bomb():
+    """Regression: aliases of one large string in channel options expanded
+    to gigabytes (std::bad_alloc, exit 134); here 1 KiB repeated 10^4
+    times through nested lists, within libFuzzer's 4096-byte max_len."""
+    text = (b"module: {name: m}\nchannels:\n  - name: a\n    kind: inproc\n"
+            b"    interface: seg\n    big: &s " + b"x" * 1024 + b"\n")
+    prev = b"s"
+    for i in range(1, 5):
+        cur = b"l%d" % i
+        text += b"    " + cur + b": &" + cur + b" [" + b", ".join(
+            [b"*" + prev] * 10) + b"]\n"
+        prev = cur
+    return text
+
+
+def alias_laughs():
+    """Ten levels of ten aliases: 10^10 nodes from a few hundred bytes."""
+    text = b"module: {name: m}\nx0: &x0 [" + b", ".join([b"lol"] * 10) + b"]\n"
+    for i in range(1, 10):
+        text += b"x%d: &x%d [" % (i, i) + b", ".join(
+            [b"*x%d" % (i - 1)] * 10) + b"]\n"
+    return text
+
+
 def config():
     t = "config"
     src = os.path.join(HERE, "..", "..", "apps", "hermd", "examples")
@@ -204,6 +228,8 @@ def config():
     write(t, "minimal.yaml", b"module:\n  name: m\n")
     # Regression: a lone "," made yaml-cpp's LoadAll loop for ever.
     write(t, "regression-loadall-comma", b",")
+    write(t, "regression-alias-bomb", alias_bomb())
+    write(t, "regression-alias-laughs", alias_laughs())
     write(t, "full.yaml", b"""module:
   name: alpha
   id: 0x30
