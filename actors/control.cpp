@@ -172,7 +172,12 @@ json to_json(const routing_stats& s) {
           {"rx_auth_challenged", s.rx_auth_challenged},
           {"rx_challenge_failed", s.rx_challenge_failed},
           {"tx_challenges", s.tx_challenges},
-          {"tx_challenge_replies", s.tx_challenge_replies}};
+          {"tx_challenge_replies", s.tx_challenge_replies},
+          {"id_conflicts", s.id_conflicts},
+          {"id_conflict", s.id_conflict_instance == 0
+                            ? json(nullptr)
+                            : json{{"instance", s.id_conflict_instance},
+                                   {"heard", s.id_conflict_heard}}}};
 }
 
 json to_json(const app_support_stats& s) {
@@ -223,7 +228,8 @@ json to_json(const neighbour_info& n) {
           {"instance", n.instance},
           {"link_kind", n.link_kind},
           {"cost", std::move(cost)},
-          {"last_heard_ms", n.last_heard_ms}};
+          {"last_heard_ms", n.last_heard_ms},
+          {"duplicate_id", n.duplicate_id}};
 }
 
 json to_json(const apo_info& a) {

@@ -16,6 +16,11 @@ constexpr uint8_t kind_merge = 1;  // a merge with another holder of our id
 /// costs at most one extra conflict.
 constexpr size_t max_recent = 64;
 
+/// Bound of the other holders of a static id remembered at once (each a
+/// misconfigured module, or a forger); beyond it the least recently heard
+/// is forgotten, which at worst reports its dispute again.
+constexpr size_t max_holders = 8;
+
 address_allocator::config normalized(address_allocator::config cfg) {
   cfg.first = std::max(cfg.first, module_id{1});
   cfg.last = std::min(cfg.last, module_id{broadcast_module - 1});
@@ -24,6 +29,7 @@ address_allocator::config normalized(address_allocator::config cfg) {
     cfg.last = last_dynamic_module;
   }
   cfg.claim_repeats = std::max(cfg.claim_repeats, uint32_t{1});
+  cfg.live_intervals = std::max(cfg.live_intervals, uint32_t{1});
   return cfg;
 }
 
@@ -48,8 +54,15 @@ address_allocator::actions address_allocator::start(time_point now) {
     id_ = cfg_.static_id;
     claiming_ = no_module;
     assigned_ = true;
+    refused_ = false;
+    holders_.clear();
+    // Probation: one announcement per interval, the first now.
+    probation_end_ = now + cfg_.claim_interval * cfg_.claim_repeats;
+    announced_ = 1;
+    next_ = now + cfg_.claim_interval;
     actions a;
     a.assigned = true;
+    a.claims.push_back(claim{id_, instance_, instance_, default_hop_limit});
     return a;
   }
   id_ = no_module;
@@ -59,6 +72,14 @@ address_allocator::actions address_allocator::start(time_point now) {
 
 address_allocator::actions address_allocator::tick(time_point now) {
   actions a;
+  if (is_unicast(cfg_.static_id)) {
+    if (refused_ || announced_ >= cfg_.claim_repeats || now < next_)
+      return a;
+    ++announced_;
+    next_ = now + cfg_.claim_interval;
+    a.claims.push_back(claim{id_, instance_, instance_, default_hop_limit});
+    return a;
+  }
   if (claiming_ == no_module || now < next_)
     return a;
   next_ = now + cfg_.claim_interval;
@@ -79,6 +100,9 @@ address_allocator::actions address_allocator::tick(time_point now) {
 
 std::optional<address_allocator::time_point>
 address_allocator::next_deadline() const {
+  if (is_unicast(cfg_.static_id) && assigned_
+      && announced_ < cfg_.claim_repeats)
+    return next_;
   if (claiming_ == no_module)
     return std::nullopt;
   return next_;
@@ -132,18 +156,29 @@ address_allocator::actions address_allocator::on_conflict(const conflict& x,
       && x.holder_instance != instance_) {
     if (!is_unicast(cfg_.static_id))
       return renumber(now);
+    // It names this very instance: its sender is alive and heard us.
+    if (on_probation(now))
+      return refuse(x.holder_instance);
     if (!recently(x.holder_instance, 0, kind_merge, cfg_.claim_interval, now))
       ++static_conflicts_;
+    if (note_holder(x.holder_instance, now))
+      a.disputed = dispute{id_, x.holder_instance, false};
   }
   return a;
 }
 
 address_allocator::actions address_allocator::on_heard(module_id id,
                                                        uint64_t instance,
-                                                       time_point now) {
+                                                       time_point now,
+                                                       bool direct) {
   actions a;
   if (instance == instance_ || !is_unicast(id))
     return a;
+  if (is_unicast(cfg_.static_id)) {
+    if (!assigned_ || id != id_)
+      return a;
+    return static_heard(instance, direct, now);
+  }
   if (claiming_ != no_module && id == claiming_) {
     // Somebody holds the id we are claiming: no need to wait for its
     // conflict.
@@ -199,6 +234,29 @@ uint32_t address_allocator::static_conflicts() const noexcept {
   return static_conflicts_;
 }
 
+uint32_t address_allocator::disputes() const noexcept {
+  return disputes_;
+}
+
+std::optional<uint64_t> address_allocator::live_holder(time_point now) const {
+  const holder* last = nullptr;
+  for (auto& h : holders_)
+    if (now < h.at + live_window() && (last == nullptr || h.at >= last->at))
+      last = &h;
+  if (last == nullptr)
+    return std::nullopt;
+  return last->instance;
+}
+
+bool address_allocator::on_probation(time_point now) const noexcept {
+  return is_unicast(cfg_.static_id) && assigned_ && !refused_
+         && now < probation_end_;
+}
+
+bool address_allocator::refused() const noexcept {
+  return refused_;
+}
+
 // -- internals -------------------------------------------------------------------
 
 address_allocator::actions address_allocator::begin_claim(time_point now,
@@ -235,6 +293,67 @@ module_id address_allocator::pick(module_id avoid) {
   if (skip && x >= avoid)
     ++x;
   return static_cast<module_id>(x);
+}
+
+address_allocator::actions
+address_allocator::static_heard(uint64_t other, bool direct, time_point now) {
+  actions a;
+  conflict ours{id_, instance_, 0, other, default_hop_limit};
+  if (on_probation(now)) {
+    // Two newcomers hear each other: the lower instance stays. Only direct
+    // evidence refuses: a flooded announcement may be our previous life's.
+    if (other < instance_) {
+      if (direct)
+        return refuse(other);
+      return a; // a live holder answers our announcement with a conflict
+    }
+    if (!recently(other, 0, kind_merge, cfg_.claim_interval, now))
+      a.conflicts.push_back(ours);
+    // Heard from itself: a live module with our id (not an old flood).
+    if (direct && note_holder(other, now))
+      a.disputed = dispute{id_, other, false};
+    return a;
+  }
+  // A holder: keeps its id, tells the other to stay out, reports.
+  if (!recently(other, 0, kind_merge, cfg_.claim_interval, now)) {
+    ++static_conflicts_;
+    a.conflicts.push_back(ours);
+  }
+  if (note_holder(other, now))
+    a.disputed = dispute{id_, other, false};
+  return a;
+}
+
+address_allocator::actions address_allocator::refuse(uint64_t other) {
+  actions a;
+  refused_ = true;
+  assigned_ = false;
+  ++disputes_;
+  a.disputed = dispute{id_, other, true};
+  return a;
+}
+
+bool address_allocator::note_holder(uint64_t other, time_point now) {
+  for (auto& h : holders_)
+    if (h.instance == other) {
+      bool lapsed = now >= h.at + live_window();
+      h.at = now;
+      if (lapsed)
+        ++disputes_;
+      return lapsed;
+    }
+  if (holders_.size() >= max_holders)
+    holders_.erase(std::min_element(holders_.begin(), holders_.end(),
+                                    [](const holder& x, const holder& y) {
+                                      return x.at < y.at;
+                                    }));
+  holders_.push_back(holder{other, now});
+  ++disputes_;
+  return true;
+}
+
+address_allocator::duration address_allocator::live_window() const {
+  return cfg_.claim_interval * cfg_.live_intervals;
 }
 
 bool address_allocator::recently(uint64_t other, uint64_t nonce, uint8_t kind,

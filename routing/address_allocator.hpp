@@ -15,6 +15,25 @@
 // instance), the instance with the higher value renumbers: it floods a
 // conflict naming itself as loser (so both sides agree) and starts claiming a
 // new id; the agent withdraws routes to its old id.
+//
+// Static ids (docs/protocol.md, "Static modules") never change, so two
+// modules configured with one id cannot be reconciled: the newcomer must
+// stay out. A static module holds its id at once (it routes from the
+// start) but is on probation for claim_repeats claim intervals: it floods
+// an announcement (a claim whose nonce is its instance) once per interval,
+// and a live holder of the id answers with a conflict naming it loser. On
+// probation it refuses to join (actions::refused) when
+//   - a conflict names it (its own instance: only a live holder that heard
+//     this very instance sends that), or
+//   - it hears directly (a neighbour's hello or update) another instance
+//     with a lower instance (two newcomers at once: the lower stays).
+// A flooded announcement of another instance alone never refuses: it may
+// be our own previous instance's (a restart after kill -9) still on its
+// way; a live holder answers our announcement anyway. After probation the
+// module is a holder: it keeps its id whatever it hears, names itself
+// holder in its conflicts (a dynamic module with that id renumbers, a
+// static newcomer refuses) and reports a dispute (actions::disputed) once
+// per other instance, again when that one was silent for live_intervals.
 
 #include <chrono>
 #include <cstdint>
@@ -41,6 +60,18 @@ public:
     duration claim_interval = std::chrono::milliseconds(300);
     module_id first = first_dynamic_module;
     module_id last = last_dynamic_module;
+    /// Static ids: another instance heard holding our id is a live holder
+    /// for this many claim_intervals after it was last heard (0 counts as
+    /// 1).
+    uint32_t live_intervals = 3;
+  };
+
+  /// Another instance holds our static id (see the top of this file).
+  struct dispute {
+    module_id id = no_module;
+    uint64_t other = 0;
+    /// We are the newcomer and must not join.
+    bool refused = false;
   };
 
   /// What the agent must do after an event.
@@ -53,6 +84,8 @@ public:
     std::optional<module_id> renumbered_from;
     /// We just got an id (or a new one).
     bool assigned = false;
+    /// Static ids: a dispute started (or we refuse to join); report it.
+    std::optional<dispute> disputed;
   };
 
   address_allocator(config cfg, uint64_t instance, uint64_t seed);
@@ -72,8 +105,11 @@ public:
   /// A conflict from the network.
   actions on_conflict(const conflict& x, time_point now);
 
-  /// We heard `id` used by `instance` (hello, update): detects merges.
-  actions on_heard(module_id id, uint64_t instance, time_point now);
+  /// We heard `id` used by `instance`: detects merges and duplicate static
+  /// ids. `direct`: from that module itself, a neighbour's hello or update;
+  /// false for a flooded announcement, which may be old.
+  actions on_heard(module_id id, uint64_t instance, time_point now,
+                   bool direct = true);
 
   /// Our current id: no_module while claiming (the first id, or a new one
   /// after losing ours).
@@ -89,12 +125,26 @@ public:
   /// Number of times this module picked a new id (conflicts, merges).
   uint32_t renumberings() const noexcept;
 
-  /// Static modules only: number of id disputes this module lost but cannot
-  /// resolve, because a static id never changes (another module holds the
-  /// same id with a lower instance). Each is a configuration error for the
-  /// agent to log. Counts at most once per other instance per
-  /// claim_interval.
+  /// Static modules only: evidence of another holder of our id seen after
+  /// probation (a hello, update or announcement of another instance, or a
+  /// conflict naming us loser), counted at most once per other instance
+  /// per claim_interval.
   uint32_t static_conflicts() const noexcept;
+
+  /// Static modules only: disputes reported (actions::disputed, refusals
+  /// included).
+  uint32_t disputes() const noexcept;
+
+  /// Static modules only: the other holder of our id most recently heard,
+  /// if heard within the last live_intervals claim intervals.
+  std::optional<uint64_t> live_holder(time_point now) const;
+
+  /// Static modules only: still on probation at `now` (started less than
+  /// claim_repeats claim intervals ago, not refused).
+  bool on_probation(time_point now) const noexcept;
+
+  /// Static modules only: refused to join (another instance holds our id).
+  bool refused() const noexcept;
 
 private:
   /// Starts claiming a fresh random id other than `avoid`.
@@ -104,6 +154,18 @@ private:
   actions renumber(time_point now);
 
   module_id pick(module_id avoid);
+
+  /// Static ids: evidence of holder `other`, heard `direct`ly or not.
+  actions static_heard(uint64_t other, bool direct, time_point now);
+
+  /// Static ids: gives up joining; `other` holds our id.
+  actions refuse(uint64_t other);
+
+  /// Static ids: remembers holder `other` heard now; true if that starts a
+  /// dispute (not heard within the live window before).
+  bool note_holder(uint64_t other, time_point now);
+
+  duration live_window() const;
 
   /// True if a conflict about (`other`, `nonce`, `kind`) went out less than
   /// `window` ago; otherwise remembers that one goes out now.
@@ -128,6 +190,18 @@ private:
   bool assigned_ = false;
   uint32_t renumberings_ = 0;
   uint32_t static_conflicts_ = 0;
+  uint32_t disputes_ = 0;
+  /// Static ids: probation ends here; announcements sent in it.
+  time_point probation_end_;
+  uint32_t announced_ = 0;
+  bool refused_ = false;
+  /// Static ids: other holders of our id and when each was last heard;
+  /// bounded (max_holders), the least recently heard forgotten first.
+  struct holder {
+    uint64_t instance;
+    time_point at;
+  };
+  std::vector<holder> holders_;
   /// Conflicts sent (or, for kind merge, disputes counted) recently: the
   /// rate limit. Pruned on use; bounded.
   std::vector<sent_conflict> recent_;

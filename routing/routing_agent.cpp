@@ -70,6 +70,8 @@ struct agent_state {
   uint32_t quarters = 0;
   /// Said goodbye: sends no more hellos.
   bool leaving = false;
+  /// Where the other holder of our static id was last reported heard.
+  std::string conflict_heard;
   byte_buffer buf;
   /// Signs and verifies packets when the network has a key.
   std::unique_ptr<authenticator> auth;
@@ -252,8 +254,43 @@ void flush_changes(agent_impl self) {
 
 // -- addressing -----------------------------------------------------------------
 
-void act(agent_impl self, address_allocator::actions acts) {
+/// "channel 1 (eth0) from link address 5, hello": where a packet came from,
+/// for id conflict reports.
+std::string heard_at(agent_impl self, channel_id ch, link_addr src,
+                     const char* what) {
   auto& st = self->state;
+  auto ci = st.channels.find(ch);
+  return "channel " + std::to_string(ch) + " ("
+         + (ci != st.channels.end() ? ci->second.info.device : "?")
+         + ") from link address " + std::to_string(src) + ", " + what;
+}
+
+/// A dispute over our static id (address_allocator): counted, reported to
+/// the configured callback; a newcomer says goodbye and ends.
+void on_dispute(agent_impl self, const address_allocator::dispute& d,
+                const std::string& where) {
+  auto& st = self->state;
+  st.stats.id_conflicts = st.alloc->disputes();
+  st.conflict_heard = where;
+  if (st.cfg.on_id_conflict)
+    st.cfg.on_id_conflict(id_conflict{d.id, d.other, where, d.refused});
+  if (!d.refused)
+    return;
+  // Routes through us are wrong from the start: neighbours drop them now.
+  send_hellos(self, true);
+  st.leaving = true;
+  self->quit(make_error(ec::already_exists,
+                        "module id " + to_hex(d.id)
+                          + " is already held by instance "
+                          + std::to_string(d.other) + " (heard on " + where
+                          + "): not joining; a static id must be unique"));
+}
+
+void act(agent_impl self, address_allocator::actions acts,
+         const std::string& where = "") {
+  auto& st = self->state;
+  if (acts.disputed)
+    on_dispute(self, *acts.disputed, where);
   for (auto& c : acts.claims) {
     st.buf.clear();
     encode(c, st.buf);
@@ -527,7 +564,8 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
     send_update(self, st.table.destinations(), ch);
   }
   if (is_unicast(h->sender))
-    act(self, st.alloc->on_heard(h->sender, h->instance, now));
+    act(self, st.alloc->on_heard(h->sender, h->instance, now),
+        h->sender == st.table.self() ? heard_at(self, ch, src, "hello") : "");
 }
 
 void on_update(agent_impl self, channel_id ch, link_addr src,
@@ -545,7 +583,8 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
   }
   auto now = self->clock().now();
   if (is_unicast(u->sender))
-    act(self, st.alloc->on_heard(u->sender, u->instance, now));
+    act(self, st.alloc->on_heard(u->sender, u->instance, now),
+        u->sender == st.table.self() ? heard_at(self, ch, src, "update") : "");
   table_change change;
   for (auto& e : u->entries) {
     // Neighbours echo our own routes back to us: not an error.
@@ -586,7 +625,8 @@ void on_seqno_request(agent_impl self, channel_id ch, const byte_buffer& bytes) 
   send_on(self, nh->channel, nh->neighbour, st.buf);
 }
 
-void on_claim(agent_impl self, channel_id ch, const byte_buffer& bytes) {
+void on_claim(agent_impl self, channel_id ch, link_addr src,
+              const byte_buffer& bytes) {
   auto& st = self->state;
   auto c = decode_claim(bytes.data(), bytes.size());
   if (!c) {
@@ -596,7 +636,10 @@ void on_claim(agent_impl self, channel_id ch, const byte_buffer& bytes) {
   if (c->instance == st.alloc->instance() || !fresh_flood(self, 4, c->id, c->nonce))
     return;
   if (c->nonce == c->instance)
-    act(self, st.alloc->on_heard(c->id, c->instance, self->clock().now()));
+    act(self,
+        st.alloc->on_heard(c->id, c->instance, self->clock().now(), false),
+        c->id == st.table.self() ? heard_at(self, ch, src, "announcement")
+                                 : "");
   else
     act(self, st.alloc->on_claim(*c, self->clock().now()));
   if (c->hop_limit > 1) {
@@ -608,7 +651,8 @@ void on_claim(agent_impl self, channel_id ch, const byte_buffer& bytes) {
   }
 }
 
-void on_conflict(agent_impl self, channel_id ch, const byte_buffer& bytes) {
+void on_conflict(agent_impl self, channel_id ch, link_addr src,
+                 const byte_buffer& bytes) {
   auto& st = self->state;
   auto c = decode_conflict(bytes.data(), bytes.size());
   if (!c) {
@@ -618,7 +662,8 @@ void on_conflict(agent_impl self, channel_id ch, const byte_buffer& bytes) {
   if (!fresh_flood(self, 5, c->id ^ (c->claim_nonce << 16),
                    c->holder_instance ^ c->loser_instance))
     return;
-  act(self, st.alloc->on_conflict(*c, self->clock().now()));
+  act(self, st.alloc->on_conflict(*c, self->clock().now()),
+      c->id == st.table.self() ? heard_at(self, ch, src, "conflict") : "");
   if (c->hop_limit > 1) {
     auto fwd = *c;
     fwd.hop_limit = static_cast<uint8_t>(c->hop_limit - 1);
@@ -809,11 +854,11 @@ void tick(agent_impl self) {
     return;
   if (++st.ticks % st.cfg.update_every == 0)
     send_update(self, st.table.destinations());
-  if (st.cfg.id == no_module && st.alloc->assigned()
-      && st.ticks % st.cfg.announce_every == 0) {
+  if (st.alloc->assigned() && st.ticks % st.cfg.announce_every == 0) {
     // An announcement is a claim whose nonce is the claimant's instance (a
     // fresh claim's nonce is random): receivers treat it as "this id is in
-    // use by that instance" and apply the merge rule.
+    // use by that instance" and apply the merge rule (a static id's holder
+    // names itself holder: address_allocator.hpp).
     claim announce{st.alloc->id(), st.alloc->instance(), st.alloc->instance(),
                    default_hop_limit};
     st.buf.clear();
@@ -984,6 +1029,8 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
           ni.link_kind = to_string(ci->second.code);
           ni.cost.assign(ci->second.cost.begin(), ci->second.cost.end());
         }
+        ni.duplicate_id = n.id == st.table.self() && is_unicast(n.id)
+                          && n.instance != st.alloc->instance();
         ni.last_heard_ms = static_cast<uint32_t>(
           std::chrono::duration_cast<std::chrono::milliseconds>(now - n.last_hello)
             .count());
@@ -994,6 +1041,10 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
     [self](atom::get, atom::stats) -> routing_stats {
       auto result = self->state.stats;
       result.reachable = static_cast<uint32_t>(self->state.table.reachable());
+      if (auto other = self->state.alloc->live_holder(self->clock().now())) {
+        result.id_conflict_instance = *other;
+        result.id_conflict_heard = self->state.conflict_heard;
+      }
       return result;
     },
     [self](channel_up& up) {
@@ -1039,10 +1090,10 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
           on_seqno_request(self, pkt.channel, pkt.bytes);
           break;
         case packet_type::claim:
-          on_claim(self, pkt.channel, pkt.bytes);
+          on_claim(self, pkt.channel, pkt.src, pkt.bytes);
           break;
         case packet_type::conflict:
-          on_conflict(self, pkt.channel, pkt.bytes);
+          on_conflict(self, pkt.channel, pkt.src, pkt.bytes);
           break;
         case packet_type::challenge_request:
         case packet_type::challenge_reply:

@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "caf/fwd.hpp"
@@ -89,12 +90,16 @@ struct neighbour_info {
   std::vector<uint32_t> cost;
   /// Milliseconds since the last hello.
   uint32_t last_heard_ms = 0;
+  /// The neighbour says it holds this module's own id: a duplicate static
+  /// id (see routing_stats::id_conflicts).
+  bool duplicate_id = false;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, neighbour_info& x) {
   return f(caf::meta::type_name("neighbour_info"), x.channel, x.link_address,
-           x.id, x.instance, x.link_kind, x.cost, x.last_heard_ms);
+           x.id, x.instance, x.link_kind, x.cost, x.last_heard_ms,
+           x.duplicate_id);
 }
 
 /// One route row for people and scripts (the paper's five fields per class).
@@ -167,6 +172,14 @@ struct routing_stats {
   uint64_t rx_challenge_failed = 0;
   uint64_t tx_challenges = 0;
   uint64_t tx_challenge_replies = 0;
+  /// Static ids: disputes over this module's id (another instance heard
+  /// holding it; one per other holder, again when it comes back after
+  /// falling silent), and the other holder while it was heard within the
+  /// last few hello intervals (0 and "" otherwise): its instance and where
+  /// it was heard ("channel 1 (eth0) from 127.0.0.1:9000, hello").
+  uint64_t id_conflicts = 0;
+  uint64_t id_conflict_instance = 0;
+  std::string id_conflict_heard;
 };
 
 template <class Inspector>
@@ -180,7 +193,8 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.tx_conflicts, x.tx_seqno_requests, x.rx_auth_failed,
            x.rx_replayed, x.rx_unsigned, x.rx_auth_table_full, x.tx_signed,
            x.rx_auth_challenged, x.rx_challenge_failed, x.tx_challenges,
-           x.tx_challenge_replies);
+           x.tx_challenge_replies, x.id_conflicts, x.id_conflict_instance,
+           x.id_conflict_heard);
 }
 
 /// Receives this module's data packets of one protocol (the application
@@ -245,6 +259,19 @@ struct packet_trace {
   std::string forwarding;
 };
 
+/// Another instance holds (or claims) this module's static id: what the
+/// agent reports to routing_config::on_id_conflict. Not a message.
+struct id_conflict {
+  module_id id = no_module;
+  /// The other holder's instance nonce.
+  uint64_t other_instance = 0;
+  /// Where it was heard: channel, link address and packet kind.
+  std::string heard;
+  /// True when this module is the newcomer and refuses to join: its agent
+  /// says goodbye and ends with ec::already_exists.
+  bool refused = false;
+};
+
 /// Timers and identity of one agent.
 struct routing_config {
   /// Static id, or no_module for dynamic addressing.
@@ -261,9 +288,10 @@ struct routing_config {
   uint32_t update_every = 4;
   /// Routes expire after this many update intervals without refresh.
   double hold_factor = 3.5;
-  /// A dynamically addressed module re-floods its claim (an announcement)
-  /// every this many hello intervals, so that a holder of the
-  /// same id in a partition that merged detects the conflict.
+  /// A module re-floods its claim (an announcement) every this many hello
+  /// intervals, so that a holder of the same id in a partition that merged
+  /// detects the conflict (a static module also announces once per hello
+  /// interval during its start-up probation: address_allocator.hpp).
   uint32_t announce_every = 10;
   /// How long a flooded broadcast's id is remembered to suppress its
   /// duplicates, and how many ids at most (the oldest are forgotten first).
@@ -288,6 +316,11 @@ struct routing_config {
   /// or delivers (see packet_trace); runs in the agent's thread, must not
   /// block. Costs nothing when empty.
   std::function<void(const packet_trace&)> tracer;
+  /// Called (in the agent's thread, must not block) when a dispute over
+  /// this module's static id starts: once per other holder, again when it
+  /// comes back after falling silent. Empty: not reported (the counters in
+  /// routing_stats still count).
+  std::function<void(const id_conflict&)> on_id_conflict;
 };
 
 /// Spawns the agent and subscribes it to `io`'s channels.

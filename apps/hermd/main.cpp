@@ -10,12 +10,25 @@
 // reload`, re-reads the file and applies its channel changes: new channels
 // open, removed ones close, changed ones reopen; the others are untouched.
 // Exit status: 0 clean stop or valid config, 1 start-up failed, 2 bad config
-// or usage.
+// or usage, 3 the module failed while running: a core actor (IO manager,
+// routing agent, application support, control service) ended, e.g. on an
+// exception, or the routing agent refused to join because another module
+// holds the configured static id. The log names the actor and the reason;
+// a supervisor (systemd's Restart=on-failure) restarts hermd.
+//
+//   hermd --fault-injection robot.yaml
+//     also serves the local control command {"cmd":"fault","actor":A}, A
+//     one of io, routing, apps, control: ends that core actor with
+//     exit_reason::kill, as a crash would, to test the supervision of a
+//     deployment (and hermd's own, in tests/apps/hermd_failure_test.cpp).
+//     Off by default; only on the local control socket (never remote).
 
 #include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
+#include <cstdlib>
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -225,12 +238,41 @@ caf::behavior route_logger(caf::stateful_actor<route_logger_state>* self,
   };
 }
 
+// -- failures ------------------------------------------------------------------------
+
+/// Set by the module's supervisor when a core actor ended; main exits 3.
+std::atomic<bool> module_failed{false};
+
+/// Runs in the supervisor's thread: logs which actor and why, then wakes
+/// main (blocked in sigwait) with a SIGTERM that finds module_failed set.
+void on_module_failure(const module_failure& f) {
+  spdlog::critical("core actor {} ended: {}; the module cannot work without "
+                   "it, exiting",
+                   f.actor, render(f.reason));
+  module_failed = true;
+  ::kill(::getpid(), SIGTERM);
+}
+
+/// Logs a dispute over this module's static id (routing_config).
+void on_id_conflict(const id_conflict& c) {
+  if (c.refused)
+    spdlog::critical("module id {} is already held by instance {} (heard on "
+                     "{}): not joining; give this module another id",
+                     to_hex(c.id), c.other_instance, c.heard);
+  else
+    spdlog::error("duplicate module id {}: instance {} also uses it (heard on "
+                  "{}); this module keeps it (it held it first), the other "
+                  "must get another id",
+                  to_hex(c.id), c.other_instance, c.heard);
+}
+
 // -- the daemon ----------------------------------------------------------------------
 
 class module_daemon {
 public:
-  module_daemon(caf::actor_system& sys, file_config cfg)
-    : sys_(sys), cfg_(std::move(cfg)) {
+  module_daemon(caf::actor_system& sys, file_config cfg,
+                bool fault_injection = false)
+    : sys_(sys), cfg_(std::move(cfg)), fault_injection_(fault_injection) {
     // nop
   }
 
@@ -239,6 +281,8 @@ public:
     auto mc = cfg_.module;
     mc.device_origins = origins(cfg_);
     mc.routing.tracer = trace_packet;
+    mc.routing.on_id_conflict = on_id_conflict;
+    mc.on_failure = on_module_failure;
     auto m = start_module(sys_, mc);
     if (!m)
       return m.error();
@@ -248,9 +292,15 @@ public:
       spdlog::info("channel '{}' up: {} {}", ch.name, ch.kind, ch.interface);
     route_logger_ = sys_.spawn(route_logger, m_.agent);
     control_ = spawn_control(sys_, m_, cfg_.name);
+    watch_module_actor(m_, caf::actor_cast<caf::actor>(control_),
+                       "herm.control");
     if (!cfg_.control_socket.empty()) {
       local_commands locals;
       locals["reload"] = [this](const std::string&) { return reload_json(); };
+      if (fault_injection_)
+        locals["fault"] = [this](const std::string& req) {
+          return fault_json(req);
+        };
       auto server = control_server::start(sys_, control_, cfg_.control_socket,
                                           std::move(locals));
       if (!server) {
@@ -411,6 +461,27 @@ public:
            + list(failed) + "}}";
   }
 
+  /// --fault-injection: ends the core actor the request names with
+  /// exit_reason::kill.
+  std::string fault_json(const std::string& req) {
+    std::pair<const char*, caf::actor> actors[] = {
+      {"io", caf::actor_cast<caf::actor>(m_.io)},
+      {"routing", caf::actor_cast<caf::actor>(m_.agent)},
+      {"apps", caf::actor_cast<caf::actor>(m_.apps)},
+      {"control", caf::actor_cast<caf::actor>(control_)},
+    };
+    for (auto& [name, a] : actors)
+      if (req.find(std::string{"\""} + name + "\"") != std::string::npos
+          && req.find("\"actor\"") != std::string::npos) {
+        spdlog::warn("fault injection: killing core actor '{}'", name);
+        caf::anon_send_exit(a, caf::exit_reason::kill);
+        return R"({"ok":true,"result":{"killed":")" + std::string{name}
+               + R"("}})";
+      }
+    return R"({"ok":false,"error":{"code":"invalid_request","message":)"
+           R"("fault: \"actor\" must be io, routing, apps or control"}})";
+  }
+
 private:
   static std::string quote(const std::string& s) {
     std::string out = "\"";
@@ -433,6 +504,7 @@ private:
   std::unique_ptr<control_server> server_;
   std::vector<caf::actor> apos_;
   std::mutex reload_mtx_;
+  bool fault_injection_ = false;
 };
 
 } // namespace
@@ -444,6 +516,10 @@ int main(int argc, char** argv) {
   std::string level;
   app.add_option("config", path, "the module's configuration file")->required();
   app.add_flag("--check", check, "validate the file and exit");
+  bool fault_injection = false;
+  app.add_flag("--fault-injection", fault_injection,
+               "serve the local control command 'fault' that kills a core "
+               "actor (tests of supervision only)");
   app.add_option("--log-level", level,
                  "override log.level (trace, debug, info, warn, error, off)");
   CLI11_PARSE(app, argc, argv);
@@ -483,7 +559,7 @@ int main(int argc, char** argv) {
   configure(sys_cfg, cfg->scheduler, cfg->threads);
   hermd::add_apo_types(sys_cfg);
   caf::actor_system sys{sys_cfg};
-  module_daemon d{sys, *cfg};
+  module_daemon d{sys, *cfg, fault_injection};
   if (auto err = d.start()) {
     spdlog::error("start-up failed: {}", render(err));
     std::cerr << "hermd: " << render(err) << std::endl;
@@ -497,6 +573,18 @@ int main(int argc, char** argv) {
       spdlog::info("SIGHUP: reloading {}", path);
       d.reload_json();
       continue;
+    }
+    if (module_failed) {
+      // The module is broken: stop what is left, bounded (an actor that
+      // is wedged must not keep the supervisor from restarting us).
+      std::thread{[] {
+        std::this_thread::sleep_for(5s);
+        spdlog::critical("stopping took over 5 s; exiting anyway");
+        std::_Exit(3);
+      }}.detach();
+      d.stop();
+      spdlog::info("stopped after a failure; exit status 3");
+      return 3;
     }
     spdlog::info("{}: leaving the network", sig == SIGINT ? "SIGINT" : "SIGTERM");
     d.stop();

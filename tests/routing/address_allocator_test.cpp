@@ -145,23 +145,39 @@ void run_together(std::vector<address_allocator*> all,
 
 // -- static addressing ---------------------------------------------------------------
 
-TEST(static_addressing, assigns_the_configured_id_at_once_and_never_claims) {
+TEST(static_addressing, assigns_the_configured_id_at_once_and_announces_it_during_probation) {
   address_allocator a{static_id(0x4E), 7, 1};
   EXPECT_EQ(a.id(), no_module);
   EXPECT_FALSE(a.assigned());
   auto acts = a.start(t0);
   EXPECT_TRUE(acts.assigned);
-  EXPECT_TRUE(acts.claims.empty());
+  // An announcement: a claim whose nonce is the instance.
+  ASSERT_EQ(acts.claims.size(), 1u);
+  EXPECT_EQ(acts.claims[0].id, 0x4E);
+  EXPECT_EQ(acts.claims[0].nonce, 7u);
+  EXPECT_EQ(acts.claims[0].instance, 7u);
   EXPECT_TRUE(acts.conflicts.empty());
   EXPECT_FALSE(acts.renumbered_from);
   EXPECT_TRUE(a.assigned());
   EXPECT_EQ(a.id(), 0x4E);
   EXPECT_FALSE(a.claiming());
-  EXPECT_FALSE(a.next_deadline());
-  auto later = a.tick(t0 + 1h);
-  EXPECT_TRUE(later.claims.empty());
-  EXPECT_FALSE(later.assigned);
+  EXPECT_TRUE(a.on_probation(t0));
+  // claim_repeats (3) announcements, one per interval, then a holder.
+  size_t announced = acts.claims.size();
+  auto now = t0;
+  while (auto due = a.next_deadline()) {
+    now = *due;
+    auto more = a.tick(now);
+    EXPECT_FALSE(more.assigned);
+    announced += more.claims.size();
+  }
+  EXPECT_EQ(announced, 3u);
+  EXPECT_EQ(now, t0 + 2 * config{}.claim_interval);
+  EXPECT_TRUE(a.on_probation(t0 + 3 * config{}.claim_interval - 1ms));
+  EXPECT_FALSE(a.on_probation(t0 + 3 * config{}.claim_interval));
+  EXPECT_TRUE(a.tick(t0 + 1h).claims.empty());
   EXPECT_EQ(a.instance(), 7u);
+  EXPECT_EQ(a.id(), 0x4E);
 }
 
 TEST(static_addressing, answers_a_claim_for_its_id_with_a_conflict) {
@@ -180,11 +196,12 @@ TEST(static_addressing, answers_a_claim_for_its_id_with_a_conflict) {
   EXPECT_TRUE(a.on_claim(claim{0x4F, 0xABC, 9, 32}, t0 + 1s).conflicts.empty());
 }
 
-TEST(static_addressing, a_static_module_that_loses_keeps_its_id_and_counts_the_dispute) {
-  // Two modules configured with the same id meet; the static one has the
-  // higher instance, so it is the loser, but a static id never changes.
+TEST(static_addressing, a_holder_keeps_its_id_names_itself_holder_and_reports_the_dispute_once) {
+  // A dynamic module took the same id, then the static one hears it. Past
+  // probation, a static module is a holder: whatever the instances, it
+  // names itself holder, and the dynamic one renumbers.
   address_allocator st{static_id(0x10), 9, 1};
-  address_allocator other{dynamic_range(0x10, 0x10), 5, 2};
+  address_allocator other{dynamic_range(0x10, 0x11), 5, 2};
   st.start(t0);
   other.start(t0);
   run_alone(other, t0);
@@ -193,29 +210,52 @@ TEST(static_addressing, a_static_module_that_loses_keeps_its_id_and_counts_the_d
   auto acts = st.on_heard(0x10, 5, now);
   ASSERT_EQ(acts.conflicts.size(), 1u);
   EXPECT_EQ(acts.conflicts[0].id, 0x10);
-  EXPECT_EQ(acts.conflicts[0].holder_instance, 5u);
+  EXPECT_EQ(acts.conflicts[0].holder_instance, 9u);
   EXPECT_EQ(acts.conflicts[0].claim_nonce, 0u);
-  EXPECT_EQ(acts.conflicts[0].loser_instance, 9u);
+  EXPECT_EQ(acts.conflicts[0].loser_instance, 5u);
   EXPECT_TRUE(acts.claims.empty());
   EXPECT_FALSE(acts.renumbered_from);
+  ASSERT_TRUE(acts.disputed);
+  EXPECT_EQ(acts.disputed->id, 0x10);
+  EXPECT_EQ(acts.disputed->other, 5u);
+  EXPECT_FALSE(acts.disputed->refused);
   EXPECT_EQ(st.id(), 0x10);
   EXPECT_TRUE(st.assigned());
   EXPECT_EQ(st.renumberings(), 0u);
   EXPECT_EQ(st.static_conflicts(), 1u);
-  // The winner computes the same conflict; receiving it within the same
-  // interval counts nothing new, and hearing again is not repeated either.
+  EXPECT_EQ(st.disputes(), 1u);
+  EXPECT_EQ(st.live_holder(now), 5u);
+  // The dynamic module computes the opposite (the lower instance wins);
+  // the static one ignores that, and the dynamic one yields to the
+  // static one's conflict.
   auto answer = other.on_heard(0x10, 9, now);
   ASSERT_EQ(answer.conflicts.size(), 1u);
   EXPECT_EQ(answer.conflicts[0].loser_instance, 9u);
-  EXPECT_EQ(other.id(), 0x10);
-  EXPECT_TRUE(st.on_conflict(answer.conflicts[0], now + 1ms).claims.empty());
-  EXPECT_TRUE(st.on_heard(0x10, 5, now + 2ms).conflicts.empty());
-  EXPECT_EQ(st.static_conflicts(), 1u);
+  auto ignored = st.on_conflict(answer.conflicts[0], now + 1ms);
+  EXPECT_TRUE(ignored.claims.empty());
+  EXPECT_FALSE(ignored.disputed); // the same dispute, still live
   EXPECT_EQ(st.id(), 0x10);
-  // A dispute that persists is reported again, once per claim_interval.
-  auto again = st.on_heard(0x10, 5, now + config{}.claim_interval);
-  EXPECT_EQ(again.conflicts.size(), 1u);
+  auto lost = other.on_conflict(acts.conflicts[0], now + 1ms);
+  EXPECT_EQ(lost.renumbered_from, module_id{0x10});
+  // Hearing the other again within the interval: no repeat, no report.
+  auto again = st.on_heard(0x10, 5, now + 2ms);
+  EXPECT_TRUE(again.conflicts.empty());
+  EXPECT_FALSE(again.disputed);
+  EXPECT_EQ(st.static_conflicts(), 1u);
+  // A dispute that persists is answered again once per claim_interval but
+  // reported once.
+  auto later = st.on_heard(0x10, 5, now + config{}.claim_interval);
+  EXPECT_EQ(later.conflicts.size(), 1u);
+  EXPECT_FALSE(later.disputed);
   EXPECT_EQ(st.static_conflicts(), 2u);
+  EXPECT_EQ(st.disputes(), 1u);
+  // Silent for live_intervals: no longer a live holder; when it comes
+  // back, that is a new dispute.
+  auto quiet = now + config{}.claim_interval + 3 * config{}.claim_interval;
+  EXPECT_FALSE(st.live_holder(quiet));
+  auto back = st.on_heard(0x10, 5, quiet);
+  ASSERT_TRUE(back.disputed);
+  EXPECT_EQ(st.disputes(), 2u);
   EXPECT_EQ(st.id(), 0x10);
 }
 
@@ -242,12 +282,248 @@ TEST(static_addressing, a_static_module_that_wins_makes_the_dynamic_holder_renum
   auto acts = st.on_heard(0x100, 9, now);
   ASSERT_EQ(acts.conflicts.size(), 1u);
   EXPECT_EQ(acts.conflicts[0].loser_instance, 9u);
-  EXPECT_EQ(st.static_conflicts(), 0u);
+  EXPECT_EQ(st.static_conflicts(), 1u);
   auto lost = dyn.on_conflict(acts.conflicts[0], now);
   EXPECT_EQ(lost.renumbered_from, module_id{0x100});
   ASSERT_EQ(lost.claims.size(), 1u);
   EXPECT_EQ(lost.claims[0].id, 0x101);
   EXPECT_EQ(st.id(), 0x100);
+}
+
+// -- static ids: probation and duplicates ---------------------------------------------
+
+namespace {
+
+/// What a static module hears, as the routing agent hands it over.
+enum class heard { hello, announcement, conflict_naming_us,
+                    conflict_naming_another, fresh_claim };
+
+/// Hands `x` to `to` as the agent does: a claim whose nonce is its instance
+/// is an announcement (flooded, so not direct).
+actions deliver_claim(address_allocator& to, const claim& x, time_point now) {
+  if (x.nonce == x.instance)
+    return to.on_heard(x.id, x.instance, now, false);
+  return to.on_claim(x, now);
+}
+
+/// Floods every output of `from` to `others`, their answers back, until
+/// quiet (instant delivery); hellos are not part of it.
+void exchange(address_allocator* from, actions a,
+              std::vector<address_allocator*> all, time_point now) {
+  std::vector<std::pair<address_allocator*, actions>> queue{{from, a}};
+  for (size_t i = 0; i < queue.size(); ++i) {
+    auto [src, acts] = queue[i];
+    for (auto* to : all) {
+      if (to == src)
+        continue;
+      for (auto& c : acts.claims)
+        queue.emplace_back(to, deliver_claim(*to, c, now));
+      for (auto& c : acts.conflicts)
+        queue.emplace_back(to, to->on_conflict(c, now));
+    }
+  }
+}
+
+} // namespace
+
+TEST(static_probation, each_signal_decides_whether_a_newcomer_joins) {
+  struct row {
+    const char* name;
+    uint64_t ours;
+    uint64_t other;
+    heard what;
+    duration after_start;
+    bool refused;
+    bool conflict_sent;
+    bool disputed;
+  };
+  // Probation: 3 intervals of 300 ms.
+  const row rows[] = {
+    {"a holder's conflict names this instance", 9, 5,
+     heard::conflict_naming_us, 100ms, true, false, true},
+    {"a conflict names this instance, whatever the holder's instance", 5, 9,
+     heard::conflict_naming_us, 100ms, true, false, true},
+    {"a conflict names another instance (our previous life)", 9, 5,
+     heard::conflict_naming_another, 100ms, false, false, false},
+    {"a lower instance's hello: two newcomers, the lower stays", 9, 5,
+     heard::hello, 100ms, true, false, true},
+    {"a higher instance's hello: tell it to stay out", 5, 9, heard::hello,
+     100ms, false, true, true},
+    {"a lower instance's announcement may be our previous life's", 9, 5,
+     heard::announcement, 100ms, false, false, false},
+    {"a higher instance's announcement: tell it to stay out", 5, 9,
+     heard::announcement, 100ms, false, true, false},
+    {"a dynamic claimant of our id is answered", 9, 5, heard::fresh_claim,
+     100ms, false, true, false},
+    {"after probation a lower instance's hello is a dispute", 9, 5,
+     heard::hello, 900ms, false, true, true},
+    {"after probation a conflict naming us is a dispute", 9, 5,
+     heard::conflict_naming_us, 900ms, false, false, true},
+    {"after probation an announcement is a dispute", 9, 5,
+     heard::announcement, 2s, false, true, true},
+    {"our own instance echoed", 9, 9, heard::hello, 100ms, false, false,
+     false},
+  };
+  for (auto& r : rows) {
+    SCOPED_TRACE(r.name);
+    address_allocator a{static_id(0x30), r.ours, 1};
+    a.start(t0);
+    auto now = t0 + r.after_start;
+    actions acts;
+    switch (r.what) {
+      case heard::hello:
+        acts = a.on_heard(0x30, r.other, now, true);
+        break;
+      case heard::announcement:
+        acts = deliver_claim(a, claim{0x30, r.other, r.other, 32}, now);
+        break;
+      case heard::conflict_naming_us:
+        acts = a.on_conflict(conflict{0x30, r.other, 0, r.ours, 32}, now);
+        break;
+      case heard::conflict_naming_another:
+        acts = a.on_conflict(conflict{0x30, r.other, 0, r.ours + 100, 32}, now);
+        break;
+      case heard::fresh_claim:
+        acts = a.on_claim(claim{0x30, 0xC0FFEE, r.other, 32}, now);
+        break;
+    }
+    EXPECT_EQ(a.refused(), r.refused);
+    EXPECT_EQ(a.assigned(), !r.refused);
+    EXPECT_EQ(!acts.conflicts.empty(), r.conflict_sent);
+    for (auto& c : acts.conflicts) {
+      EXPECT_EQ(c.holder_instance, r.ours);
+      EXPECT_EQ(c.loser_instance, r.other);
+    }
+    EXPECT_EQ(acts.disputed.has_value(), r.disputed);
+    if (acts.disputed) {
+      EXPECT_EQ(acts.disputed->id, 0x30);
+      EXPECT_EQ(acts.disputed->other, r.other);
+      EXPECT_EQ(acts.disputed->refused, r.refused);
+    }
+    EXPECT_FALSE(acts.renumbered_from);
+    EXPECT_TRUE(acts.claims.empty());
+  }
+}
+
+TEST(static_probation, a_newcomer_with_a_held_id_stays_out_and_the_holder_keeps_it) {
+  // Rows: the newcomer's instance below or above the holder's, and whether
+  // they are neighbours (hear each other's hellos) or far apart (only the
+  // flooded announcement and conflict).
+  struct row {
+    const char* name;
+    uint64_t holder;
+    uint64_t newcomer;
+    bool neighbours;
+  };
+  const row rows[] = {
+    {"far apart, newcomer lower", 50, 7, false},
+    {"far apart, newcomer higher", 50, 70, false},
+    {"neighbours, newcomer lower", 50, 7, true},
+    {"neighbours, newcomer higher", 50, 70, true},
+  };
+  for (auto& r : rows) {
+    SCOPED_TRACE(r.name);
+    address_allocator holder{static_id(0x40), r.holder, 1};
+    address_allocator newcomer{static_id(0x40), r.newcomer, 2};
+    std::vector<address_allocator*> all{&holder, &newcomer};
+    holder.start(t0);
+    auto now = t0 + 1min;
+    exchange(&newcomer, newcomer.start(now), all, now);
+    if (r.neighbours) {
+      now += 10ms;
+      exchange(&holder, holder.on_heard(0x40, r.newcomer, now), all, now);
+      if (newcomer.assigned())
+        exchange(&newcomer, newcomer.on_heard(0x40, r.holder, now), all, now);
+    }
+    EXPECT_TRUE(newcomer.refused());
+    EXPECT_FALSE(newcomer.assigned());
+    EXPECT_FALSE(holder.refused());
+    EXPECT_TRUE(holder.assigned());
+    EXPECT_EQ(holder.id(), 0x40);
+    EXPECT_EQ(holder.disputes(), 1u);
+    EXPECT_EQ(holder.live_holder(now), r.newcomer);
+    EXPECT_EQ(newcomer.disputes(), 1u);
+    // A refused module announces no more.
+    EXPECT_FALSE(newcomer.next_deadline());
+    EXPECT_TRUE(newcomer.tick(now + 1s).claims.empty());
+  }
+}
+
+TEST(static_probation, of_two_static_newcomers_at_once_exactly_the_lower_instance_joins) {
+  for (bool neighbours : {false, true}) {
+    SCOPED_TRACE(neighbours ? "neighbours" : "far apart");
+    address_allocator a{static_id(0x41), 300, 1};
+    address_allocator b{static_id(0x41), 200, 2};
+    std::vector<address_allocator*> all{&a, &b};
+    auto a_start = a.start(t0);
+    auto b_start = b.start(t0);
+    exchange(&a, a_start, all, t0);
+    exchange(&b, b_start, all, t0);
+    if (neighbours) {
+      if (a.assigned())
+        exchange(&a, a.on_heard(0x41, 200, t0 + 1ms), all, t0 + 1ms);
+      if (b.assigned())
+        exchange(&b, b.on_heard(0x41, 300, t0 + 1ms), all, t0 + 1ms);
+    }
+    EXPECT_TRUE(a.refused());
+    EXPECT_FALSE(b.refused());
+    EXPECT_TRUE(b.assigned());
+    // b's probation ends undisturbed.
+    auto now = t0;
+    while (auto due = b.next_deadline()) {
+      now = *due;
+      exchange(&b, b.tick(now), all, now);
+    }
+    EXPECT_FALSE(b.on_probation(now + 300ms));
+    EXPECT_EQ(b.id(), 0x41);
+  }
+}
+
+TEST(static_probation, a_module_restarted_after_kill_9_comes_back_with_its_id) {
+  // The old instance (5) is dead: it answers nothing. Its last flooded
+  // announcement still arrives during the new instance's (9) probation,
+  // and neighbours still route to the id (their updates never reach the
+  // allocator: the agent skips entries for its own id).
+  address_allocator old_life{static_id(0x42), 5, 1};
+  old_life.start(t0);
+  auto restart = t0 + 1min;
+  address_allocator fresh{static_id(0x42), 9, 3};
+  auto acts = fresh.start(restart);
+  EXPECT_TRUE(acts.assigned);
+  auto late = deliver_claim(fresh, claim{0x42, 5, 5, 31}, restart + 5ms);
+  EXPECT_FALSE(late.disputed);
+  EXPECT_TRUE(late.conflicts.empty());
+  // A conflict about the old instance (from an earlier dispute) neither.
+  EXPECT_FALSE(fresh.on_conflict(conflict{0x42, 77, 0, 5, 30}, restart + 6ms)
+                 .disputed);
+  auto now = restart;
+  while (auto due = fresh.next_deadline()) {
+    now = *due;
+    EXPECT_TRUE(fresh.tick(now).conflicts.empty());
+  }
+  EXPECT_FALSE(fresh.refused());
+  EXPECT_TRUE(fresh.assigned());
+  EXPECT_FALSE(fresh.on_probation(now + 300ms));
+  EXPECT_EQ(fresh.id(), 0x42);
+  EXPECT_EQ(fresh.disputes(), 0u);
+  // Had the old instance been alive, its answer would have kept us out.
+  address_allocator again{static_id(0x42), 11, 4};
+  exchange(&again, again.start(restart), {&again, &old_life}, restart);
+  EXPECT_TRUE(again.refused());
+}
+
+TEST(static_probation, remembers_a_bounded_number_of_other_holders) {
+  address_allocator a{static_id(0x43), 1, 1};
+  a.start(t0);
+  auto now = t0 + 10s;
+  // 100 forged holders in one interval: each is one dispute, the memory
+  // keeps the last few; the most recent is the live holder.
+  for (uint64_t i = 0; i < 100; ++i)
+    a.on_heard(0x43, 1000 + i, now);
+  EXPECT_EQ(a.disputes(), 100u);
+  EXPECT_EQ(a.live_holder(now), 1099u);
+  EXPECT_EQ(a.id(), 0x43);
+  EXPECT_TRUE(a.assigned());
 }
 
 // -- dynamic addressing: one claimant ------------------------------------------------
