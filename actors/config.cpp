@@ -264,7 +264,8 @@ public:
   void module(const field& f, file_config& cfg) const {
     auto fs = entries(f.value, f.path, f.key_line, "a map",
                       {"name", "id", "hello_interval_ms", "hello_loss",
-                       "update_every", "hold_factor", "announce_every"});
+                       "update_every", "hold_factor", "announce_every",
+                       "limits"});
     auto line = f.key_line;
     auto& r = cfg.module.routing;
     cfg.name = module_name(require(fs, "module.name", line, name_rule));
@@ -280,6 +281,24 @@ public:
       r.hold_factor = number(*x, 1, 1000);
     if (auto* x = find(fs, "module.announce_every"))
       r.announce_every = static_cast<uint32_t>(integer(*x, 1, 1000000));
+    if (auto* x = find(fs, "module.limits"))
+      limits(*x, r);
+  }
+
+  /// module.limits: bounds on routing state (routing_config, route_limits).
+  void limits(const field& f, routing_config& r) const {
+    auto fs = entries(f.value, f.path, f.key_line, "a map",
+                      {"destinations", "destinations_per_neighbour", "routes",
+                       "neighbours", "neighbours_per_channel"});
+    auto get = [&](const char* key, uint64_t max, size_t& out) {
+      if (auto* x = find(fs, f.path + "." + key))
+        out = static_cast<size_t>(integer(*x, 1, max));
+    };
+    get("destinations", 65534, r.limits.destinations);
+    get("destinations_per_neighbour", 65534, r.limits.per_neighbour);
+    get("routes", 1048576, r.limits.routes);
+    get("neighbours", 65536, r.max_neighbours);
+    get("neighbours_per_channel", 65536, r.max_neighbours_per_channel);
   }
 
   static constexpr const char* name_rule

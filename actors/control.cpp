@@ -177,7 +177,17 @@ json to_json(const routing_stats& s) {
           {"id_conflict", s.id_conflict_instance == 0
                             ? json(nullptr)
                             : json{{"instance", s.id_conflict_instance},
-                                   {"heard", s.id_conflict_heard}}}};
+                                   {"heard", s.id_conflict_heard}}},
+          {"destinations", s.destinations},
+          {"routes", s.routes},
+          {"neighbours", s.neighbours},
+          {"rx_routes_over_limit", s.rx_routes_over_limit},
+          {"rx_routes_over_share", s.rx_routes_over_share},
+          {"rx_neighbours_over_limit", s.rx_neighbours_over_limit},
+          {"seqno_requests_over_limit", s.seqno_requests_over_limit},
+          {"floods_evicted", s.floods_evicted},
+          {"flood_ids_evicted", s.flood_ids_evicted},
+          {"sources_evicted", s.sources_evicted}};
 }
 
 json to_json(const app_support_stats& s) {

@@ -197,6 +197,9 @@ constexpr duration min_source_hold = std::chrono::minutes{5};
 
 struct route_table::impl {
   module_id self;
+  route_limits limits;
+  size_t route_count = 0;
+  uint64_t sources_evicted = 0;
   seqno_t own_seqno = 0;
   std::map<next_hop, neighbour> neighbours;
   std::map<module_id, destination> dests;
@@ -208,7 +211,7 @@ struct route_table::impl {
   duration longest_hold{};
   size_t reachable = 0;
 
-  explicit impl(module_id id) : self(id) {
+  impl(module_id id, route_limits lim) : self(id), limits(lim) {
   }
 
   duration source_hold() const {
@@ -288,6 +291,7 @@ struct route_table::impl {
   void erase_route(module_id dest, destination& d, route* r,
                    time_point tombstone) {
     expiries.erase({r->expires, dest, r->via});
+    --route_count;
     if (r != &d.routes.back())
       *r = std::move(d.routes.back());
     d.routes.pop_back();
@@ -390,7 +394,8 @@ struct route_table::impl {
 
 // -- construction -------------------------------------------------------------------
 
-route_table::route_table(module_id self) : impl_(std::make_unique<impl>(self)) {
+route_table::route_table(module_id self, route_limits limits)
+  : impl_(std::make_unique<impl>(self, limits)) {
 }
 
 route_table::~route_table() = default;
@@ -475,26 +480,45 @@ table_change route_table::remove_channel(channel_id channel) {
 
 // -- updates ------------------------------------------------------------------------
 
-bool route_table::update(next_hop from, const advertised& adv, time_point now,
-                         duration hold, table_change& out) {
+update_result route_table::update(next_hop from, const advertised& adv,
+                                  time_point now, duration hold,
+                                  table_change& out) {
   auto& s = *impl_;
   if (!well_formed(adv, s.self))
-    return false;
+    return update_result::malformed;
   auto nb = s.neighbours.find(from);
   if (nb == s.neighbours.end())
-    return false;
-  hold = std::max(hold, duration::zero());
-  s.longest_hold = std::max(s.longest_hold, hold);
+    return update_result::unknown_neighbour;
   auto retraction = is_retraction(adv);
   auto di = s.dests.find(adv.origin);
   if (di == s.dests.end() && retraction)
-    return true; // retraction of a route we never had
-  auto& d = di != s.dests.end() ? di->second : s.make_destination(adv.origin);
-  auto r = d.find(from);
+    return update_result::accepted; // retraction of a route we never had
+  auto r = di != s.dests.end() ? di->second.find(from) : nullptr;
+  if (!r && retraction)
+    return update_result::accepted;
+  // A retraction of a route already retracted is no news and must not keep
+  // it alive: two neighbours that both hold retracted routes from each
+  // other advertise the retraction to each other in every periodic update,
+  // and refreshing would keep the destination (and its room in the table)
+  // for ever. It expires at the end of the hold the first retraction set.
+  if (r && retraction && r->refmetrics == infinite_metrics)
+    return update_result::accepted;
+  // Bounds apply to what is new only: a route held is refreshed whatever
+  // the table's size, so that a full table keeps serving what it has.
   if (!r) {
-    if (retraction)
-      return true;
+    if (di == s.dests.end() && s.dests.size() >= s.limits.destinations)
+      return update_result::over_limit;
+    if (nb->second.destinations.size() >= s.limits.per_neighbour)
+      return update_result::over_share;
+    if (s.route_count >= s.limits.routes)
+      return update_result::over_limit;
+  }
+  hold = std::max(hold, duration::zero());
+  s.longest_hold = std::max(s.longest_hold, hold);
+  auto& d = di != s.dests.end() ? di->second : s.make_destination(adv.origin);
+  if (!r) {
     d.routes.emplace_back();
+    ++s.route_count;
     r = &d.routes.back();
     r->via = from;
     nb->second.destinations.insert(adv.origin);
@@ -513,7 +537,7 @@ bool route_table::update(next_hop from, const advertised& adv, time_point now,
   s.expiries.emplace(r->expires, adv.origin, from);
   s.clear_tombstone(adv.origin, d);
   s.recompute(adv.origin, d, out);
-  return true;
+  return update_result::accepted;
 }
 
 table_change route_table::expire(time_point now) {
@@ -548,6 +572,14 @@ table_change route_table::expire(time_point now) {
   auto hold = s.source_hold();
   while (!s.idle_sources.empty() && s.idle_sources.begin()->first + hold <= now)
     s.forget_source(s.idle_sources.begin()->second);
+  // Destinations come and go as fast as neighbours advertise and retract
+  // them, and each leaves an idle source behind for minutes: keep at most
+  // as many idle ones as the table holds destinations, forgetting the
+  // oldest first (their FD only matters if they come back before the hold).
+  while (s.idle_sources.size() > s.limits.destinations) {
+    s.forget_source(s.idle_sources.begin()->second);
+    ++s.sources_evicted;
+  }
   return out;
 }
 
@@ -639,6 +671,27 @@ std::vector<route_row> route_table::rows() const {
 
 size_t route_table::reachable() const {
   return impl_->reachable;
+}
+
+const route_limits& route_table::limits() const noexcept {
+  return impl_->limits;
+}
+
+size_t route_table::size() const {
+  return impl_->dests.size();
+}
+
+size_t route_table::routes() const {
+  return impl_->route_count;
+}
+
+size_t route_table::routes_from(next_hop nh) const {
+  auto i = impl_->neighbours.find(nh);
+  return i == impl_->neighbours.end() ? 0 : i->second.destinations.size();
+}
+
+uint64_t route_table::sources_evicted() const {
+  return impl_->sources_evicted;
 }
 
 } // namespace herm

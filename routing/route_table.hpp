@@ -77,13 +77,48 @@ struct table_change {
   std::vector<module_id> starving;
 };
 
+/// Bounds on what neighbours can make the table hold. Neighbours decide how
+/// many destinations they advertise, so without bounds one hostile or broken
+/// neighbour decides how much memory a module uses.
+struct route_limits {
+  /// Destinations in the table (reachable, or retracted and still advertised
+  /// as such). Robot networks have tens to hundreds of modules: 4096 leaves
+  /// room for a fleet while a full table stays around a megabyte.
+  size_t destinations = 4096;
+  /// Routes learned from one neighbour. A quarter of `destinations`: a
+  /// neighbour that floods the table takes at most a quarter of it, and the
+  /// rest stays for the others; a leaf module behind a single neighbour
+  /// still reaches 1024 modules (some 50 robots of 20 modules each). Raise
+  /// both for larger networks.
+  size_t per_neighbour = 1024;
+  /// Routes in total (a destination has one per neighbour advertising it):
+  /// four per destination on average.
+  size_t routes = 16384;
+};
+
+/// What update() did with an advertised destination.
+enum class update_result : uint8_t {
+  /// Installed, refreshed or retracted (or a retraction of nothing).
+  accepted,
+  /// Absurd: the origin is us, broadcast or none; a hop count above
+  /// max_route_hops; a path longer than its hop count.
+  malformed,
+  /// Not from a neighbour set with set_neighbour().
+  unknown_neighbour,
+  /// A new destination while the table holds `route_limits::destinations`,
+  /// or a new route while it holds `route_limits::routes`.
+  over_limit,
+  /// A new route from a neighbour that has `route_limits::per_neighbour`.
+  over_share,
+};
+
 class route_table {
 public:
   using time_point = std::chrono::steady_clock::time_point;
   using duration = std::chrono::steady_clock::duration;
 
   /// `self` is this module's id; routes to it are never installed.
-  explicit route_table(module_id self);
+  explicit route_table(module_id self, route_limits limits = {});
 
   ~route_table();
 
@@ -114,11 +149,12 @@ public:
   // -- updates ---------------------------------------------------------------------
 
   /// Applies one advertised destination heard from neighbour `from` at
-  /// `now`; the route expires at now + `hold` unless refreshed. Absurd input
-  /// (the origin is us, broadcast or none; a hop count above max_route_hops;
-  /// a path longer than its hop count) is refused and returns false.
-  bool update(next_hop from, const advertised& adv, time_point now,
-              duration hold, table_change& out);
+  /// `now`; the route expires at now + `hold` unless refreshed. Says why
+  /// when it refuses (see update_result). Past a limit, routes already held
+  /// keep being refreshed and served and retractions are always applied;
+  /// only new routes are refused. O(log N).
+  update_result update(next_hop from, const advertised& adv, time_point now,
+                       duration hold, table_change& out);
 
   /// Drops routes whose hold time ran out (and sources unused for long).
   table_change expire(time_point now);
@@ -152,6 +188,25 @@ public:
 
   /// Number of destinations with a selected route in class 0.
   size_t reachable() const;
+
+  // -- bounds --------------------------------------------------------------------------
+
+  const route_limits& limits() const noexcept;
+
+  /// Destinations held (reachable or retracted), bounded by
+  /// `limits().destinations`.
+  size_t size() const;
+
+  /// Routes held, bounded by `limits().routes`.
+  size_t routes() const;
+
+  /// Routes held from neighbour `nh`, bounded by `limits().per_neighbour`.
+  size_t routes_from(next_hop nh) const;
+
+  /// Feasibility distances of origins without routes are kept a while
+  /// (loop avoidance) but at most `limits().destinations` of them; this
+  /// counts those forgotten early, oldest first, to stay within that.
+  uint64_t sources_evicted() const;
 
 private:
   struct impl;

@@ -47,22 +47,32 @@ struct agent_state {
   std::map<next_hop, neighbour_state> neighbours;
   std::map<uint8_t, network_receiver_actor> receivers;
   /// Floods seen recently (claims, conflicts, seqno requests), by key, with
-  /// the time they were last relayed; bounded.
-  std::map<std::tuple<uint8_t, uint64_t, uint64_t>, time_point> floods;
+  /// the time they were last relayed, and the same in arrival order for
+  /// forgetting them; bounded by cfg.max_floods.
+  using flood_key = std::tuple<uint8_t, uint64_t, uint64_t>;
+  std::map<flood_key, time_point> floods;
+  std::deque<std::pair<time_point, flood_key>> floods_order;
   /// Triggered updates not sent yet (see apply_change).
   std::set<module_id> pending_changed;
   std::set<module_id> pending_starving;
   bool flush_scheduled = false;
-  /// When a seqno request for a destination was last sent.
+  /// When a seqno request for a destination was last sent, within the last
+  /// hello interval (older ones are forgotten at the next tick); at most
+  /// cfg.max_seqno_requests.
   std::map<module_id, time_point> requested;
   /// Flooded broadcasts seen, by (source, flood id), and the same keys in
   /// arrival order for forgetting the oldest; bounded by cfg.max_flood_ids.
   std::set<std::pair<module_id, uint32_t>> flood_ids;
   std::deque<std::pair<time_point, std::pair<module_id, uint32_t>>> flood_order;
   uint32_t next_flood_id = 1;
-  /// Route listeners and what they were told last, per destination.
+  /// Route listeners and what they were told last, per destination
+  /// reachable (a subset of the table's destinations), and the
+  /// destinations whose selected route may have changed since the last
+  /// flush (a subset of the table's destinations too, and of the ones it
+  /// dropped since): both bounded by the table's bound.
   std::vector<route_listener_actor> route_listeners;
   std::map<module_id, reachability> told;
+  std::set<module_id> pending_told;
   routing_stats stats;
   uint16_t hello_seqno = 0;
   /// Hello intervals and quarter intervals since start.
@@ -181,10 +191,17 @@ void send_seqno_requests(agent_impl self, const std::vector<module_id>& dests) {
   auto now = self->clock().now();
   for (auto d : dests) {
     // At most one request per destination per hello interval.
-    auto& last = st.requested[d];
-    if (last != time_point{} && now - last < st.cfg.hello_interval)
+    auto i = st.requested.find(d);
+    if (i != st.requested.end() && now - i->second < st.cfg.hello_interval)
       continue;
-    last = now;
+    if (i == st.requested.end()) {
+      if (st.requested.size() >= st.cfg.max_seqno_requests) {
+        ++st.stats.seqno_requests_over_limit;
+        continue;
+      }
+      i = st.requested.emplace(d, now).first;
+    }
+    i->second = now;
     auto adv = st.table.advertisement(d);
     seqno_request req{st.table.self(), d,
                       static_cast<seqno_t>((adv ? adv->seqno : 0) + 1),
@@ -196,28 +213,56 @@ void send_seqno_requests(agent_impl self, const std::vector<module_id>& dests) {
   }
 }
 
-/// Collects what changed; a flush message queued behind the messages being
-/// processed sends one triggered update for the whole burst (a cold start
-/// or a failure changes many destinations through many updates at once).
-void notify_reachability(agent_impl self, const std::vector<module_id>& dests) {
+/// The selected class-0 route to `d` as a route event (was_* fields
+/// empty). O(log N).
+reachability route_event(agent_impl self, module_id d) {
+  auto& st = self->state;
+  reachability now;
+  now.id = d;
+  auto nh = st.table.lookup(d, 0);
+  if (!nh)
+    return now;
+  now.reachable = true;
+  now.channel = nh->channel;
+  now.neighbour = nh->neighbour;
+  if (auto n = st.neighbours.find(*nh); n != st.neighbours.end())
+    now.next = n->second.id;
+  if (auto adv = st.table.advertisement(d)) {
+    now.hops = adv->hops[0];
+    now.cost = adv->metrics[0];
+    for (auto code : adv->path[0]) {
+      if (!now.path.empty())
+        now.path += '-';
+      now.path += to_string(code);
+    }
+  }
+  return now;
+}
+
+/// Tells route listeners what changed for `dests` since they were told:
+/// one event per destination whose selected class-0 route differs in any
+/// way (appeared, withdrawn, other cost, hops, next hop or path).
+/// O(|dests| log N).
+void tell_route_changes(agent_impl self, const std::vector<module_id>& dests) {
   auto& st = self->state;
   if (st.route_listeners.empty())
     return;
   for (auto d : dests) {
-    reachability now{d, false, 0, 0};
-    if (st.table.lookup(d, 0)) {
-      now.reachable = true;
-      if (auto adv = st.table.advertisement(d)) {
-        now.hops = adv->hops[0];
-        now.cost = adv->metrics[0];
-      }
-    }
+    auto now = route_event(self, d);
     auto i = st.told.find(d);
-    bool was = i != st.told.end();
-    if (now.reachable == was)
+    if (i != st.told.end()) {
+      now.was_reachable = true;
+      now.old_cost = i->second.cost;
+      auto& was = i->second;
+      if (now.reachable && now.cost == was.cost && now.hops == was.hops
+          && now.next == was.next && now.channel == was.channel
+          && now.neighbour == was.neighbour && now.path == was.path)
+        continue;
+    } else if (!now.reachable) {
       continue;
+    }
     if (now.reachable)
-      st.told.emplace(d, now);
+      st.told[d] = now;
     else
       st.told.erase(i);
     for (auto& l : st.route_listeners)
@@ -225,9 +270,14 @@ void notify_reachability(agent_impl self, const std::vector<module_id>& dests) {
   }
 }
 
+/// Collects what changed; a flush message queued behind the messages being
+/// processed sends one triggered update for the whole burst (a cold start
+/// or a failure changes many destinations through many updates at once),
+/// and one route event per destination changed. O(|change| log N).
 void apply_change(agent_impl self, const table_change& change) {
   auto& st = self->state;
-  notify_reachability(self, change.changed);
+  if (!st.route_listeners.empty())
+    st.pending_told.insert(change.changed.begin(), change.changed.end());
   st.pending_changed.insert(change.changed.begin(), change.changed.end());
   st.pending_starving.insert(change.starving.begin(), change.starving.end());
   if (!st.flush_scheduled
@@ -246,6 +296,11 @@ void flush_changes(agent_impl self) {
                                   st.pending_starving.end());
   st.pending_changed.clear();
   st.pending_starving.clear();
+  if (!st.pending_told.empty()) {
+    std::vector<module_id> told(st.pending_told.begin(), st.pending_told.end());
+    st.pending_told.clear();
+    tell_route_changes(self, told);
+  }
   if (!changed.empty())
     send_update(self, changed);
   if (!starving.empty())
@@ -332,16 +387,27 @@ bool fresh_flood(agent_impl self, uint8_t type, uint64_t a, uint64_t b) {
   auto& st = self->state;
   auto now = self->clock().now();
   auto key = std::make_tuple(type, a, b);
-  auto i = st.floods.find(key);
   auto window = st.cfg.hello_interval / 2;
-  if (i != st.floods.end() && now - i->second < window)
+  // What is older than the window suppresses nothing: forget it, oldest
+  // first. A key is recorded only when absent (or forgotten), so the map
+  // and the order hold the same entries.
+  auto forget_oldest = [&st] {
+    st.floods.erase(st.floods_order.front().second);
+    st.floods_order.pop_front();
+  };
+  while (!st.floods_order.empty()
+         && now - st.floods_order.front().first >= window)
+    forget_oldest();
+  if (st.floods.count(key) > 0)
     return false;
-  if (st.floods.size() > 4096) {
-    // Forget floods older than the window; bounded memory.
-    for (auto j = st.floods.begin(); j != st.floods.end();)
-      j = now - j->second >= window ? st.floods.erase(j) : std::next(j);
+  // Full of fresh ones (a flood of distinct floods): forget the oldest; a
+  // duplicate of it may then be relayed once more, which hop limits bound.
+  while (!st.floods_order.empty() && st.floods.size() >= st.cfg.max_floods) {
+    forget_oldest();
+    ++st.stats.floods_evicted;
   }
-  st.floods[key] = now;
+  st.floods.emplace(key, now);
+  st.floods_order.emplace_back(now, key);
   return true;
 }
 
@@ -470,6 +536,8 @@ bool fresh_broadcast(agent_impl self, module_id src, uint32_t id) {
     return false;
   st.flood_order.emplace_back(now, key);
   return true;
+    if (now - st.flood_order.front().first < st.cfg.flood_memory)
+      ++st.stats.flood_ids_evicted;
 }
 
 /// Sends a flooded broadcast on every channel but `except` (signed per
@@ -536,6 +604,21 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
     ++st.stats.rx_malformed;
     return;
   }
+/// True if one more neighbour on channel `ch` stays within the bounds
+/// (routing_config::max_neighbours, max_neighbours_per_channel). O(log n +
+/// the channel's neighbours).
+bool room_for_neighbour(agent_impl self, channel_id ch) {
+  auto& st = self->state;
+  if (st.neighbours.size() >= st.cfg.max_neighbours)
+    return false;
+  auto first = st.neighbours.lower_bound(next_hop{ch, 0});
+  size_t on_channel = 0;
+  for (auto i = first; i != st.neighbours.end() && i->first.channel == ch; ++i)
+    if (++on_channel >= st.cfg.max_neighbours_per_channel)
+      return false;
+  return true;
+}
+
   auto ci = st.channels.find(ch);
   if (ci == st.channels.end())
     return;
@@ -559,6 +642,10 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
   n.last_hello = now;
   n.interval = std::chrono::milliseconds(h->interval_ms);
   if (added || restarted) {
+  if (st.neighbours.count(nh) == 0 && !room_for_neighbour(self, ch)) {
+    ++st.stats.rx_neighbours_over_limit;
+    return;
+  }
     apply_change(self, st.table.set_neighbour(nh, ci->second.cost, ci->second.code));
     // Tell the new neighbour everything we know at once.
     send_update(self, st.table.destinations(), ch);
@@ -590,8 +677,19 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
     // Neighbours echo our own routes back to us: not an error.
     if (e.origin == st.table.self())
       continue;
-    if (!st.table.update(nh, e, now, st.hold(), change))
-      ++st.stats.rx_refused_routes;
+    switch (st.table.update(nh, e, now, st.hold(), change)) {
+      case update_result::accepted:
+        break;
+      case update_result::over_limit:
+        ++st.stats.rx_routes_over_limit;
+        break;
+      case update_result::over_share:
+        ++st.stats.rx_routes_over_share;
+        break;
+      default:
+        ++st.stats.rx_refused_routes;
+        break;
+    }
   }
   apply_change(self, change);
 }
@@ -847,6 +945,10 @@ void tick(agent_impl self) {
   change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
                        change.changed.end());
   apply_change(self, change);
+  // Seqno requests older than an interval no longer hold back new ones.
+  for (auto i = st.requested.begin(); i != st.requested.end();)
+    i = now - i->second >= st.cfg.hello_interval ? st.requested.erase(i)
+                                                 : std::next(i);
   if (auto due = st.alloc->next_deadline(); due && *due <= now)
     act(self, st.alloc->tick(now));
   self->delayed_send(self, st.cfg.hello_interval / 4, atom::tick_v);
@@ -934,6 +1036,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
     if (seed == 0)
       seed = (uint64_t{rd()} << 32) | rd();
   }
+  init.table = route_table{no_module, init.cfg.limits};
   address_allocator::config acfg;
   acfg.static_id = init.cfg.id;
   acfg.claim_interval = init.cfg.hello_interval;
@@ -982,7 +1085,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
         // Nobody listened: what was told is stale; tell the whole table.
         st.told.clear();
         st.route_listeners.push_back(l);
-        notify_reachability(self, st.table.destinations());
+        tell_route_changes(self, st.table.destinations());
       } else {
         for (auto& kv : st.told)
           self->send(l, kv.second);
@@ -990,6 +1093,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       }
       self->monitor(l);
     },
+        st.pending_told.clear();
     [self](atom::get, atom::routes) -> std::vector<route_info> {
       auto& st = self->state;
       std::vector<route_info> result;
@@ -1039,11 +1143,16 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       return result;
     },
     [self](atom::get, atom::stats) -> routing_stats {
-      auto result = self->state.stats;
-      result.reachable = static_cast<uint32_t>(self->state.table.reachable());
-      if (auto other = self->state.alloc->live_holder(self->clock().now())) {
+      auto& st = self->state;
+      auto result = st.stats;
+      result.reachable = static_cast<uint32_t>(st.table.reachable());
+      result.destinations = static_cast<uint32_t>(st.table.size());
+      result.routes = static_cast<uint32_t>(st.table.routes());
+      result.neighbours = static_cast<uint32_t>(st.neighbours.size());
+      result.sources_evicted = st.table.sources_evicted();
+      if (auto other = st.alloc->live_holder(self->clock().now())) {
         result.id_conflict_instance = *other;
-        result.id_conflict_heard = self->state.conflict_heard;
+        result.id_conflict_heard = st.conflict_heard;
       }
       return result;
     },

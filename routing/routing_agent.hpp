@@ -58,8 +58,12 @@ typename Inspector::result_type inspect(Inspector& f, packet_delivered& x) {
            x.priority, x.hops, x.payload);
 }
 
-/// A destination became reachable or unreachable (a selected route of size
-/// class 0 appeared or went away); sent to route listeners.
+/// The selected size-class-0 route to a destination changed: it appeared,
+/// went away (withdrawn), or changed its cost, hop count, next hop or
+/// forwarding path; sent to route listeners. Carries everything a log line
+/// needs, so that nobody has to query the table to explain a change.
+/// Coalesced: one event per destination per burst of updates (the agent's
+/// flush), saying how the route differs from the previous event's.
 struct reachability {
   module_id id = no_module;
   bool reachable = false;
@@ -71,12 +75,27 @@ struct reachability {
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, reachability& x) {
   return f(caf::meta::type_name("reachability"), x.id, x.reachable, x.hops,
-           x.cost);
+           x.cost, x.was_reachable, x.old_cost, x.next, x.channel, x.neighbour,
+           x.path);
 }
+  /// What the previous event for `id` said (false and 0 for the first).
+  bool was_reachable = false;
+  uint32_t old_cost = 0;
+  /// The selected route when reachable: the next hop's module id
+  /// (no_module when its hello did not say), the channel and link address
+  /// it is reached on, and the link kinds from here to `id`
+  /// ("Ethernet-CAN2.0").
+  module_id next = no_module;
+  channel_id channel = 0;
+  link_addr neighbour = 0;
+  std::string path;
 
 inline bool operator==(const reachability& a, const reachability& b) {
   return a.id == b.id && a.reachable == b.reachable && a.hops == b.hops
-         && a.cost == b.cost;
+         && a.cost == b.cost && a.was_reachable == b.was_reachable
+         && a.old_cost == b.old_cost && a.next == b.next
+         && a.channel == b.channel && a.neighbour == b.neighbour
+         && a.path == b.path;
 }
 
 /// One neighbour as the agent sees it.
@@ -179,6 +198,30 @@ struct routing_stats {
   /// it was heard ("channel 1 (eth0) from 127.0.0.1:9000, hello").
   uint64_t id_conflicts = 0;
   uint64_t id_conflict_instance = 0;
+  /// What the route table and the neighbour table hold now (gauges), each
+  /// bounded by routing_config::limits.
+  uint32_t destinations = 0;
+  uint32_t routes = 0;
+  uint32_t neighbours = 0;
+  /// Refused because a bound was reached (routing_config::limits): new
+  /// destinations or routes past the table's total (rx_routes_over_limit)
+  /// or past one neighbour's share (rx_routes_over_share), one per update
+  /// entry; hellos of new neighbours past the total or a channel's share
+  /// (rx_neighbours_over_limit); seqno requests not sent because
+  /// routing_config::max_seqno_requests were sent within the last hello
+  /// interval (seqno_requests_over_limit).
+  uint64_t rx_routes_over_limit = 0;
+  uint64_t rx_routes_over_share = 0;
+  uint64_t rx_neighbours_over_limit = 0;
+  uint64_t seqno_requests_over_limit = 0;
+  /// Remembered ids forgotten early to stay within their bound, oldest
+  /// first: flooded control packets (claims, conflicts, seqno requests;
+  /// floods_evicted: a duplicate may then be relayed once more), flooded
+  /// broadcasts (flood_ids_evicted: likewise), feasibility distances of
+  /// origins without a route (sources_evicted).
+  uint64_t floods_evicted = 0;
+  uint64_t flood_ids_evicted = 0;
+  uint64_t sources_evicted = 0;
   std::string id_conflict_heard;
 };
 
@@ -193,15 +236,18 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.tx_conflicts, x.tx_seqno_requests, x.rx_auth_failed,
            x.rx_replayed, x.rx_unsigned, x.rx_auth_table_full, x.tx_signed,
            x.rx_auth_challenged, x.rx_challenge_failed, x.tx_challenges,
-           x.tx_challenge_replies, x.id_conflicts, x.id_conflict_instance,
-           x.id_conflict_heard);
+           x.tx_challenge_replies, x.destinations, x.routes, x.neighbours,
+           x.rx_routes_over_limit, x.rx_routes_over_share,
+           x.rx_neighbours_over_limit, x.seqno_requests_over_limit,
+           x.floods_evicted, x.flood_ids_evicted, x.sources_evicted,
+           x.id_conflicts, x.id_conflict_instance, x.id_conflict_heard);
 }
 
 /// Receives this module's data packets of one protocol (the application
 /// layer).
 using network_receiver_actor = caf::typed_actor<caf::reacts_to<packet_delivered>>;
 
-/// Learns when destinations become reachable or unreachable.
+/// Learns each change of a destination's selected route (reachability).
 using route_listener_actor = caf::typed_actor<caf::reacts_to<reachability>>;
 
 using routing_agent_actor = caf::typed_actor<
@@ -213,8 +259,8 @@ using routing_agent_actor = caf::typed_actor<
   /// Registers the receiver of one protocol.
   caf::reacts_to<atom::subscribe, uint8_t, network_receiver_actor>,
   /// Registers a route listener: it gets one reachability message per
-  /// destination reachable now, then one per change; it is forgotten when
-  /// it exits.
+  /// destination reachable now (the current state, never a history), then
+  /// one per change, coalesced per burst; it is forgotten when it exits.
   caf::reacts_to<atom::subscribe, atom::routes, route_listener_actor>,
   caf::replies_to<atom::get, atom::routes>::with<std::vector<route_info>>,
   caf::replies_to<atom::get, atom::neighbors>::with<std::vector<neighbour_info>>,
@@ -304,6 +350,22 @@ struct routing_config {
   /// key every control packet sent carries a trailer and every one received
   /// must carry a valid one; data packets as `auth.data` says. A neighbour's
   /// packets count only once it has answered a challenge (`auth.challenge`,
+  /// Flooded control packets (claims, conflicts, seqno requests) remembered
+  /// for half a hello interval to suppress their duplicates, at most.
+  size_t max_floods = 4096;
+  /// Bounds on the route table (see route_limits).
+  route_limits limits;
+  /// Neighbours at most, in total and per channel. A fake peer on a
+  /// broadcast link can appear from any number of link addresses; a robot's
+  /// bus or Ethernet segment has tens of modules. New neighbours past a
+  /// bound are ignored (their hellos counted) until one is lost.
+  size_t max_neighbours = 512;
+  size_t max_neighbours_per_channel = 128;
+  /// Seqno requests this module originates per hello interval at most.
+  /// Each is flooded towards its origin, and a neighbour can make every
+  /// destination it advertised starve at once (RFC 8966 3.8.2.1): the
+  /// excess waits for a later interval (counted).
+  size_t max_seqno_requests = 64;
   /// on by default): the agent challenges unknown sender indexes on the
   /// link they came from, answers challenges (followed by its hello, so
   /// that the challenger has a neighbour one round trip after it asked).

@@ -191,7 +191,9 @@ void trace_packet(const packet_trace& t) {
   }
 }
 
-/// Logs every change of reachability with the selected route.
+/// Logs every change of a destination's selected route, from the route
+/// event alone: one line per change, never a table query (a query per
+/// event made a flood of advertisements cost O(N^2)).
 struct route_logger_state {
   static inline const char* name = "hermd.route_logger";
 };
@@ -201,39 +203,20 @@ caf::behavior route_logger(caf::stateful_actor<route_logger_state>* self,
   self->send(agent, atom::subscribe_v, atom::routes_v,
              caf::actor_cast<route_listener_actor>(self));
   return {
-    [self, agent](reachability& r) {
+    [](reachability& r) {
       if (!r.reachable) {
-        spdlog::info("route to {} withdrawn: unreachable", to_hex(r.id));
+        spdlog::info("route to {} withdrawn: unreachable (was cost {})",
+                     to_hex(r.id), r.old_cost);
         return;
       }
-      self->request(agent, 5s, atom::get_v, atom::routes_v)
-        .then(
-          [self, agent, r](std::vector<route_info>& rows) {
-            auto row = std::find_if(rows.begin(), rows.end(), [&](auto& x) {
-              return x.destination == r.id && x.size_class == 0 && x.selected;
-            });
-            if (row == rows.end()) {
-              spdlog::info("route to {}: cost {}, {} hop(s)", to_hex(r.id),
-                           r.cost, r.hops);
-              return;
-            }
-            // Name the next hop by its module id, not its link address.
-            self->request(agent, 5s, atom::get_v, atom::neighbors_v)
-              .then(
-                [row = *row](std::vector<neighbour_info>& ns) {
-                  std::string next = "link address " + row.neighbour;
-                  for (auto& n : ns)
-                    if (n.channel == row.channel
-                        && n.link_address == row.neighbour)
-                      next = to_hex(n.id);
-                  spdlog::info("route to {}: cost {}, {} hop(s), next hop {} "
-                               "on channel {}, path {}",
-                               to_hex(row.destination), row.cost, row.hops,
-                               next, row.channel, row.forwarding);
-                },
-                [](caf::error&) {});
-          },
-          [](caf::error&) {});
+      auto next = r.next != no_module
+                    ? to_hex(r.next)
+                    : "link address " + std::to_string(r.neighbour);
+      auto was = r.was_reachable ? fmt::format(" (was {})", r.old_cost)
+                                 : std::string{" (new)"};
+      spdlog::info("route to {}: cost {}{}, {} hop(s), next hop {} on channel "
+                   "{}, path {}",
+                   to_hex(r.id), r.cost, was, r.hops, next, r.channel, r.path);
     },
   };
 }

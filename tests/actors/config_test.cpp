@@ -546,8 +546,8 @@ const error_case error_cases[] = {
   {"unknown_module_key",
    lines({"module:", "  name: m", "  hello_intervall_ms: 100"}),
    "robot.yaml:3: module.hello_intervall_ms: unknown key (expected name, id, "
-   "hello_interval_ms, hello_loss, update_every, hold_factor or "
-   "announce_every)"},
+   "hello_interval_ms, hello_loss, update_every, hold_factor, "
+   "announce_every or limits)"},
   {"duplicate_key",
    lines({"module:", "  name: a", "  id: 1", "  name: b"}),
    "robot.yaml:4: module.name: duplicate key (first at line 2)"},

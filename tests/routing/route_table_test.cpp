@@ -82,7 +82,7 @@ std::optional<route_row> row_of(const route_table& t, module_id dest,
 table_change feed(route_table& t, next_hop from, const advertised& a,
                   time_point now = t0) {
   table_change out;
-  EXPECT_TRUE(t.update(from, a, now, hold, out));
+  EXPECT_EQ(t.update(from, a, now, hold, out), update_result::accepted);
   return out;
 }
 
@@ -409,7 +409,8 @@ TEST(route_table, a_retraction_is_always_accepted) {
   EXPECT_EQ(row->cost, infinite_metric);
   // A retraction of a route we never had is accepted and ignored.
   table_change none;
-  EXPECT_TRUE(t.update(n, retraction(0x77, 1), t0, hold, none));
+  EXPECT_EQ(t.update(n, retraction(0x77, 1), t0, hold, none),
+            update_result::accepted);
   EXPECT_TRUE(none.changed.empty());
   EXPECT_EQ(t.advertisement(0x77), std::nullopt);
 }
@@ -721,7 +722,8 @@ TEST(route_table, keeps_every_path_and_fails_over_to_the_next_best) {
   EXPECT_EQ(t.rows().size(), size_classes);
   // Updates from a removed neighbour are refused until it is set again.
   table_change none;
-  EXPECT_FALSE(t.update(n1, adv(0x42, 1, 5, {link_code::can20}), t0, hold, none));
+  EXPECT_EQ(t.update(n1, adv(0x42, 1, 5, {link_code::can20}), t0, hold, none),
+            update_result::unknown_neighbour);
 }
 
 TEST(route_table, equal_routes_break_ties_by_hops_then_next_hop) {
@@ -850,6 +852,7 @@ TEST(route_table, refuses_absurd_updates_and_changes_nothing) {
   struct {
     const char* name;
     std::function<void(advertised&, next_hop&)> spoil;
+    update_result why = update_result::malformed;
   } cases[] = {
     {"origin is us", [](advertised& a, next_hop&) { a.origin = self_id; }},
     {"origin is broadcast",
@@ -863,7 +866,8 @@ TEST(route_table, refuses_absurd_updates_and_changes_nothing) {
     {"path longer than hops",
      [](advertised& a, next_hop&) { a.path[0].push_back(link_code::usb20); }},
     {"path shorter than hops", [](advertised& a, next_hop&) { a.hops[2] = 3; }},
-    {"unknown neighbour", [](advertised&, next_hop& from) { from.neighbour = 9; }},
+    {"unknown neighbour", [](advertised&, next_hop& from) { from.neighbour = 9; },
+     update_result::unknown_neighbour},
   };
   for (auto& c : cases) {
     SCOPED_TRACE(c.name);
@@ -873,12 +877,13 @@ TEST(route_table, refuses_absurd_updates_and_changes_nothing) {
     auto from = n;
     c.spoil(a, from);
     table_change out;
-    EXPECT_FALSE(t.update(from, a, t0, hold, out));
+    EXPECT_EQ(t.update(from, a, t0, hold, out), c.why);
     EXPECT_TRUE(out.changed.empty());
     EXPECT_TRUE(out.starving.empty());
     EXPECT_TRUE(t.rows().empty());
     EXPECT_EQ(t.destinations(), std::vector<module_id>{self_id});
-    EXPECT_TRUE(t.update(n, valid(), t0, hold, out)); // the control
+    EXPECT_EQ(t.update(n, valid(), t0, hold, out),
+              update_result::accepted); // the control
   }
 }
 
@@ -977,7 +982,8 @@ TEST(route_table, renumbering_drops_routes_to_the_new_id_and_keeps_the_seqno) {
   for (auto& r : t.rows())
     EXPECT_NE(r.destination, 0x0120);
   table_change out;
-  EXPECT_FALSE(t.update(n, adv(0x0120, 9, 0), t0, hold, out));
+  EXPECT_EQ(t.update(n, adv(0x0120, 9, 0), t0, hold, out),
+            update_result::malformed);
   // The neighbour echoes our old id back with our seqno: never a route
   // (it would lead back to us). A new holder's newer seqno is.
   feed(t, n, adv(0x4E, 1, 10, {link_code::ethernet}));
@@ -997,4 +1003,144 @@ TEST(route_table, moves_keep_the_table) {
   other = std::move(moved);
   EXPECT_EQ(other.self(), self_id);
   EXPECT_EQ(other.lookup(0x42, 0), n);
+}
+
+// -- bounds ---------------------------------------------------------------------------------
+
+// Neighbours decide how much they advertise; the table decides how much it
+// keeps. Each case has neighbours advertise destinations 0x1000 + i in turn
+// and says how many of each are kept and why the rest are refused.
+TEST(route_table, refuses_new_routes_past_each_bound_and_keeps_the_held_ones) {
+  struct {
+    const char* name;
+    route_limits limits;
+    /// Destinations each neighbour advertises (neighbour j: next_hop{1, j+1}),
+    /// all from 0x1000 on (so two neighbours advertise the same ones).
+    std::vector<size_t> advertised;
+    std::vector<size_t> kept;
+    update_result why;
+    size_t destinations;
+  } cases[] = {
+    {"one neighbour past its share", {100, 10, 100}, {30}, {10},
+     update_result::over_share, 10},
+    {"a second neighbour has a share of its own", {100, 10, 100}, {30, 30},
+     {10, 10}, update_result::over_share, 10},
+    {"past the total of destinations", {16, 100, 100}, {30}, {16},
+     update_result::over_limit, 16},
+    {"the total is shared by all neighbours", {16, 100, 100}, {10, 30},
+     {10, 16}, update_result::over_limit, 16},
+    {"past the total of routes", {100, 100, 25}, {20, 20}, {20, 5},
+     update_result::over_limit, 20},
+  };
+  for (auto& c : cases) {
+    SCOPED_TRACE(c.name);
+    route_table t{self_id, c.limits};
+    std::vector<next_hop> nbs;
+    for (size_t j = 0; j < c.advertised.size(); ++j) {
+      nbs.push_back(next_hop{1, j + 1});
+      t.set_neighbour(nbs.back(), costs(10), link_code::ethernet);
+    }
+    for (size_t j = 0; j < nbs.size(); ++j) {
+      size_t accepted = 0;
+      for (size_t i = 0; i < c.advertised[j]; ++i) {
+        table_change out;
+        auto res = t.update(nbs[j], adv(static_cast<module_id>(0x1000 + i), 1, 5),
+                            t0, hold, out);
+        if (res == update_result::accepted)
+          ++accepted;
+        else
+          EXPECT_EQ(res, c.why) << i;
+      }
+      EXPECT_EQ(accepted, c.kept[j]) << j;
+      EXPECT_EQ(t.routes_from(nbs[j]), c.kept[j]) << j;
+    }
+    EXPECT_EQ(t.size(), c.destinations);
+    EXPECT_LE(t.size(), c.limits.destinations);
+    EXPECT_LE(t.routes(), c.limits.routes);
+    // What is held keeps being refreshed (past the hold) and served.
+    auto later = t0 + hold - 1s;
+    for (size_t i = 0; i < c.kept[0]; ++i)
+      feed(t, nbs[0], adv(static_cast<module_id>(0x1000 + i), 2, 5), later);
+    t.expire(t0 + hold);
+    for (size_t i = 0; i < c.kept[0]; ++i)
+      EXPECT_EQ(t.lookup(static_cast<module_id>(0x1000 + i), 0), nbs[0]) << i;
+    // A retraction is always taken, and what it frees (once its tombstone
+    // is gone) takes new routes again.
+    feed(t, nbs[0], retraction(0x1000, 3), later);
+    EXPECT_EQ(t.lookup(0x1000, 0), std::nullopt);
+    for (size_t j = 0; j < nbs.size(); ++j)
+      t.remove_neighbour(nbs[j]);
+    t.expire(t0 + 10 * hold);
+    EXPECT_EQ(t.size(), 0u);
+    EXPECT_EQ(t.routes(), 0u);
+    t.set_neighbour(nbs[0], costs(10), link_code::ethernet);
+    feed(t, nbs[0], adv(0x2000, 1, 5), t0 + 10 * hold);
+    EXPECT_EQ(t.lookup(0x2000, 0), nbs[0]);
+  }
+}
+
+TEST(route_table, a_route_held_is_refreshed_when_the_table_is_full) {
+  route_table t{self_id, route_limits{2, 2, 4}};
+  next_hop n{1, 1};
+  t.set_neighbour(n, costs(10), link_code::ethernet);
+  feed(t, n, adv(0x42, 1, 5));
+  feed(t, n, adv(0x43, 1, 5));
+  table_change out;
+  EXPECT_EQ(t.update(n, adv(0x44, 1, 5), t0, hold, out),
+            update_result::over_limit);
+  // A new seqno and metric for a held destination: taken and advertised.
+  out = feed(t, n, adv(0x42, 2, 7));
+  EXPECT_EQ(out.changed, std::vector<module_id>{0x42});
+  EXPECT_EQ(t.advertisement(0x42)->metrics[0], 17u);
+  // A retraction of a destination never held is no news, not a refusal.
+  EXPECT_EQ(t.update(n, retraction(0x45, 1), t0, hold, out),
+            update_result::accepted);
+  EXPECT_EQ(t.size(), 2u);
+}
+
+// Every destination that goes leaves its origin's feasibility distance
+// behind for minutes; a neighbour that keeps advertising new origins and
+// dropping them must not make those pile up.
+TEST(route_table, idle_sources_are_kept_no_more_than_the_destination_bound) {
+  route_table t{self_id, route_limits{4, 4, 16}};
+  next_hop n{1, 1};
+  auto now = t0;
+  constexpr size_t rounds = 10;
+  for (size_t round = 0; round < rounds; ++round) {
+    t.set_neighbour(n, costs(10), link_code::ethernet);
+    for (size_t i = 0; i < 4; ++i)
+      feed(t, n, adv(static_cast<module_id>(0x1000 + 4 * round + i), 1, 5), now);
+    EXPECT_EQ(t.reachable(), 4u);
+    t.remove_neighbour(n);
+    now += 2 * hold; // past the tombstones, far within the source hold
+    t.expire(now);
+    EXPECT_EQ(t.size(), 0u);
+  }
+  EXPECT_EQ(t.sources_evicted(), 4 * (rounds - 1));
+}
+
+// Two neighbours that hold retracted routes from each other keep
+// advertising the retraction to each other; that must not keep the
+// destination (and its room in the table) for ever.
+TEST(route_table, repeated_retractions_do_not_keep_a_route_alive) {
+  route_table t{self_id};
+  next_hop n{1, 1};
+  t.set_neighbour(n, costs(10), link_code::ethernet);
+  feed(t, n, adv(0x42, 1, 5));
+  feed(t, n, retraction(0x42, 1));
+  EXPECT_EQ(t.lookup(0x42, 0), std::nullopt);
+  // Retracted again and again, every half hold: still gone after the hold
+  // the first retraction set, and its tombstone after another.
+  for (auto at = t0 + hold / 2; at < t0 + 3 * hold; at += hold / 2) {
+    feed(t, n, retraction(0x42, 1), at);
+    t.expire(at);
+  }
+  EXPECT_EQ(t.size(), 0u);
+  EXPECT_EQ(t.routes(), 0u);
+  // A new advertisement after a retraction is taken (and refreshed) again.
+  feed(t, n, adv(0x42, 2, 5), t0 + 3 * hold);
+  EXPECT_EQ(t.lookup(0x42, 0), n);
+  feed(t, n, adv(0x42, 2, 5), t0 + 3 * hold + hold / 2);
+  t.expire(t0 + 4 * hold);
+  EXPECT_EQ(t.lookup(0x42, 0), n);
 }

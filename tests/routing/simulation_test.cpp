@@ -460,7 +460,11 @@ TEST_F(routing_sim, route_listeners_learn_reachability_changes) {
   net.kill(2);
   net.advance(1s);
   ASSERT_EQ(log->size(), 1u);
-  EXPECT_EQ(log->back(), (reachability{id_of(2), false, 0, 0}));
+  reachability withdrawn;
+  withdrawn.id = id_of(2);
+  withdrawn.was_reachable = true;
+  withdrawn.old_cost = 20;
+  EXPECT_EQ(log->back(), withdrawn);
   log->clear();
   net.start_module(2);
   net.advance(1s);
