@@ -1,7 +1,15 @@
 // The control service's local endpoint: a Unix-domain stream socket served
-// by one thread of its own (blocking I/O belongs here, never in an actor),
-// and the client side hermctl uses. One JSON request per line, one JSON
-// reply per line.
+// by threads of its own (blocking I/O belongs here, never in an actor), and
+// the client side hermctl uses. One JSON request per line, one JSON reply
+// per line.
+//
+// Threads: one accepts connections and starts one worker thread per client,
+// at most max_clients at once, so that a slow or idle client never holds up
+// another (a client beyond the bound gets a "busy" reply and is closed). A
+// worker disconnects its client after client_idle without a byte, or when a
+// request line is not complete line_deadline after its first byte. Local
+// commands (hermd's reload) still run one at a time. Stopping the server
+// wakes every thread through the stop pipe and joins them.
 
 #include "actors/control.hpp"
 
@@ -17,6 +25,10 @@
 #include <cstring>
 #include <filesystem>
 #include <future>
+#include <list>
+#include <memory>
+#include <mutex>
+#include <system_error>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -38,9 +50,23 @@ using clock_type = std::chrono::steady_clock;
 /// Longest request or reply line, newline excluded.
 constexpr size_t max_line = 64 * 1024;
 
-/// A client that sends nothing for this long is disconnected, so that one
-/// idle client cannot hold the endpoint.
+/// A client that sends nothing for this long is disconnected, so that idle
+/// clients cannot hold the endpoint's slots.
 constexpr std::chrono::seconds client_idle{30};
+
+/// A request line must be complete this long after its first byte: a client
+/// that trickles bytes (one every few seconds) is cut off, not served for
+/// ever.
+constexpr std::chrono::seconds line_deadline{10};
+
+/// Clients served at once; one more gets a "busy" reply and is closed.
+constexpr size_t max_clients = 16;
+
+/// After a line over max_line, the rest of it is read and dropped (so that
+/// the client, still writing, is not reset before it reads its error reply)
+/// up to this many bytes and for at most drain_time.
+constexpr size_t max_drain = 16 * 1024 * 1024;
+constexpr std::chrono::seconds drain_time{5};
 
 std::string errno_text(int err) {
   return std::strerror(err);
@@ -80,7 +106,9 @@ struct fd_guard {
 bool wait_ready(int fd, short events, clock_type::time_point deadline,
                 int stop_fd = -1) {
   for (;;) {
-    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+    // Rounded up: false only once the deadline has passed (callers tell a
+    // timeout from a stop by the clock).
+    auto left = std::chrono::ceil<std::chrono::milliseconds>(
       deadline - clock_type::now());
     if (left.count() <= 0)
       return false;
@@ -138,7 +166,7 @@ public:
     char c = 1;
     [[maybe_unused]] auto n = ::write(stop_write_, &c, 1);
     if (thread_.joinable())
-      thread_.join();
+      thread_.join(); // it joins the workers
     ::close(listen_fd_);
     ::close(stop_read_);
     ::close(stop_write_);
@@ -153,33 +181,85 @@ public:
   }
 
 private:
+  /// A thread serving one client.
+  struct worker {
+    std::thread thread;
+    std::atomic<bool> done{false};
+  };
+
   void run() {
+    std::list<std::unique_ptr<worker>> workers;
+    auto reap = [&] {
+      for (auto i = workers.begin(); i != workers.end();) {
+        if ((*i)->done.load()) {
+          (*i)->thread.join();
+          i = workers.erase(i);
+        } else {
+          ++i;
+        }
+      }
+      clients_ = workers.size();
+    };
     for (;;) {
       pollfd p[2] = {{listen_fd_, POLLIN, 0}, {stop_read_, POLLIN, 0}};
-      auto n = ::poll(p, 2, -1);
+      // Wakes now and then to reap workers that ended.
+      auto n = ::poll(p, 2, 200);
       if (n < 0 && errno == EINTR)
         continue;
       if (n < 0 || p[1].revents != 0)
-        return;
+        break;
+      reap();
       if (p[0].revents == 0)
         continue;
       int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
       if (fd < 0)
         continue;
-      serve_client(fd);
-      ::close(fd);
+      if (workers.size() >= max_clients) {
+        refuse(fd, "too many control clients (" + std::to_string(max_clients)
+                     + " connected); try again");
+        continue;
+      }
+      auto w = std::make_unique<worker>();
+      auto* raw = w.get();
+      try {
+        w->thread = std::thread{[this, fd, raw] {
+          serve_client(fd);
+          ::close(fd);
+          raw->done = true;
+        }};
+      } catch (const std::system_error& ex) {
+        refuse(fd, std::string{"cannot serve another client: "} + ex.what());
+        continue;
+      }
+      workers.push_back(std::move(w));
+      clients_ = workers.size();
     }
+    // Stopping: every worker sees the stop pipe (or ends its reply soon).
+    for (auto& w : workers)
+      w->thread.join();
+    clients_ = 0;
   }
 
-  /// Answers every line from one client until it closes, idles or breaks
-  /// the line bound.
+  /// Answers a client that cannot be served with one error line, closes it.
+  void refuse(int fd, const std::string& why) {
+    ++clients_refused_;
+    write_all(fd, reply_error("busy", why) + '\n',
+              clock_type::now() + std::chrono::milliseconds(100));
+    ::close(fd);
+  }
+
+  /// Answers every line from one client until it closes, idles, trickles or
+  /// breaks the line bound.
   void serve_client(int fd) {
     std::string buf;
+    // When the first byte of the line in progress arrived.
+    auto line_start = clock_type::now();
     for (;;) {
       auto nl = buf.find('\n');
       if (nl != std::string::npos) {
         auto line = buf.substr(0, nl);
         buf.erase(0, nl + 1);
+        line_start = clock_type::now();
         if (!line.empty() && line.back() == '\r')
           line.pop_back();
         if (line.find_first_not_of(" \t") == std::string::npos)
@@ -190,30 +270,78 @@ private:
         continue;
       }
       if (buf.size() > max_line) {
+        ++lines_too_long_;
         write_all(fd,
                   reply_error("invalid_request",
                               "request line longer than "
                                 + std::to_string(max_line) + " bytes")
                     + '\n',
                   clock_type::now() + std::chrono::seconds(5));
+        drain_line(fd);
         return;
       }
-      if (!wait_ready(fd, POLLIN, clock_type::now() + client_idle, stop_read_))
+      auto partial = buf.find_first_not_of(" \t\r") != std::string::npos;
+      auto deadline = partial ? line_start + line_deadline
+                              : clock_type::now() + client_idle;
+      if (!wait_ready(fd, POLLIN, deadline, stop_read_)) {
+        if (clock_type::now() >= deadline) {
+          ++clients_timed_out_;
+          if (partial)
+            write_all(fd,
+                      reply_error("timeout",
+                                  "request line not complete within "
+                                    + std::to_string(line_deadline.count())
+                                    + " s")
+                        + '\n',
+                      clock_type::now() + std::chrono::milliseconds(100));
+        }
         return;
+      }
       char chunk[4096];
       auto n = ::recv(fd, chunk, sizeof(chunk), MSG_DONTWAIT);
       if (n < 0 && (errno == EINTR || errno == EAGAIN))
         continue;
       if (n <= 0) {
         // A last request without its newline still gets its answer.
-        if (n == 0 && buf.find_first_not_of(" \t\r") != std::string::npos
-            && buf.size() <= max_line)
+        if (n == 0 && partial && buf.size() <= max_line)
           write_all(fd, answer(buf) + '\n',
                     clock_type::now() + std::chrono::seconds(5));
         return;
       }
+      if (!partial)
+        line_start = clock_type::now();
       buf.append(chunk, static_cast<size_t>(n));
     }
+  }
+
+  /// After an error reply to an over-long line: says it sends no more, then
+  /// reads and drops the rest of the line (bounded), so that closing does
+  /// not reset a client that is still writing it.
+  void drain_line(int fd) {
+    ::shutdown(fd, SHUT_WR);
+    auto deadline = clock_type::now() + drain_time;
+    size_t dropped = 0;
+    char chunk[4096];
+    while (dropped < max_drain
+           && wait_ready(fd, POLLIN, deadline, stop_read_)) {
+      auto n = ::recv(fd, chunk, sizeof(chunk), MSG_DONTWAIT);
+      if (n < 0 && (errno == EINTR || errno == EAGAIN))
+        continue;
+      if (n <= 0)
+        return;
+      if (std::memchr(chunk, '\n', static_cast<size_t>(n)) != nullptr)
+        return;
+      dropped += static_cast<size_t>(n);
+    }
+  }
+
+  /// The server's own counters, for the "stats" reply.
+  json counters() const {
+    return {{"clients", clients_.load()},
+            {"max_clients", max_clients},
+            {"clients_refused", clients_refused_.load()},
+            {"clients_timed_out", clients_timed_out_.load()},
+            {"lines_too_long", lines_too_long_.load()}};
   }
 
   /// One reply line for one request line; never throws.
@@ -224,12 +352,26 @@ private:
         return reply_error("invalid_request",
                            "a request is one JSON object with a \"cmd\"");
       auto cmd = req.find("cmd");
+      auto here = req.count("module") == 0;
       if (cmd != req.end() && cmd->is_string()) {
         auto local = locals_.find(cmd->get<std::string>());
-        if (local != locals_.end() && req.count("module") == 0)
+        if (local != locals_.end() && here) {
+          // They may block and were written for one caller at a time.
+          std::lock_guard<std::mutex> guard{locals_mtx_};
           return local->second(line);
+        }
       }
-      return ask_service(line);
+      auto reply = ask_service(line);
+      if (here && cmd != req.end() && *cmd == "stats") {
+        // This socket's own counters join the module's.
+        auto j = json::parse(reply, nullptr, false);
+        if (!j.is_discarded() && j.value("ok", false)
+            && j["result"].is_object()) {
+          j["result"]["control_socket"] = counters();
+          return j.dump(-1, ' ', false, json::error_handler_t::replace);
+        }
+      }
+      return reply;
     } catch (const std::exception& e) {
       return reply_error("internal", e.what());
     }
@@ -275,10 +417,15 @@ private:
   control_actor service_;
   std::string path_;
   local_commands locals_;
+  std::mutex locals_mtx_;
   int listen_fd_;
   int stop_read_;
   int stop_write_;
   ino_t inode_;
+  std::atomic<size_t> clients_{0};
+  std::atomic<uint64_t> clients_refused_{0};
+  std::atomic<uint64_t> clients_timed_out_{0};
+  std::atomic<uint64_t> lines_too_long_{0};
   std::thread thread_;
 };
 

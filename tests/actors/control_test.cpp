@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <poll.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -977,3 +978,154 @@ TEST(hermctl, profiles_and_cost_match_table_1) {
 }
 
 } // namespace
+
+// -- the socket under load: slow, many and over-long clients ----------------------------
+
+namespace {
+
+/// A raw client connection to `path`; -1 if it cannot connect.
+int connect_raw(const std::string& path) {
+  int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, path.c_str(), sizeof(addr.sun_path) - 1);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  timeval tv{10, 0}; // bounds every read below
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+  return fd;
+}
+
+bool send_text(int fd, const std::string& text) {
+  return ::send(fd, text.data(), text.size(), MSG_NOSIGNAL)
+         == static_cast<ssize_t>(text.size());
+}
+
+/// Reads one reply line (at most 10 s); empty at EOF or timeout.
+std::string read_line(int fd) {
+  std::string out;
+  char c;
+  while (::recv(fd, &c, 1, 0) == 1) {
+    if (c == '\n')
+      return out;
+    out += c;
+  }
+  return out;
+}
+
+} // namespace
+
+// One client sending its request a byte every 300 ms used to hold the only
+// server thread: every other hermctl waited. Now they are answered
+// meanwhile, and the slow request too once complete.
+TEST_F(control_test, a_slow_client_does_not_hold_up_other_clients) {
+  int slow = connect_raw(socket);
+  ASSERT_GE(slow, 0);
+  const std::string request = "{\"cmd\":\"echo\"}\n";
+  for (size_t i = 0; i + 1 < request.size(); ++i) {
+    ASSERT_TRUE(send_text(slow, request.substr(i, 1)));
+    if (i % 4 == 0) {
+      auto reply = control_call(socket, R"({"cmd":"echo"})", 5s);
+      ASSERT_TRUE(reply) << "while a client trickles: " << render(reply.error());
+      EXPECT_NE(reply->find("\"alpha\""), std::string::npos) << *reply;
+    }
+    if (i == 6) {
+      auto run = hermctl({"-s", socket, "--timeout", "5000", "info"});
+      EXPECT_EQ(run.status, 0) << run.output;
+    }
+    std::this_thread::sleep_for(300ms);
+  }
+  ASSERT_TRUE(send_text(slow, "\n"));
+  auto reply = json::parse(read_line(slow), nullptr, false);
+  ::close(slow);
+  ASSERT_FALSE(reply.is_discarded());
+  EXPECT_EQ(reply["result"]["name"], "alpha") << reply.dump();
+}
+
+// A client still trickling its line 10 s after its first byte is cut off
+// with a timeout reply, and counted.
+TEST_F(control_test, a_request_line_not_complete_within_the_line_deadline_is_cut_off) {
+  int slow = connect_raw(socket);
+  ASSERT_GE(slow, 0);
+  const std::string request = "{\"cmd\":\"echo\",\"pad\":\"" + std::string(100, 'x');
+  std::string got;
+  auto deadline = std::chrono::steady_clock::now() + 20s;
+  size_t i = 0;
+  while (got.empty() && std::chrono::steady_clock::now() < deadline) {
+    send_text(slow, request.substr(i++ % request.size(), 1));
+    pollfd p{slow, POLLIN, 0};
+    if (::poll(&p, 1, 500) > 0)
+      got = read_line(slow);
+  }
+  ::close(slow);
+  auto j = json::parse(got, nullptr, false);
+  ASSERT_FALSE(j.is_discarded()) << got;
+  EXPECT_EQ(j["error"]["code"], "timeout") << got;
+  auto counters = result({{"cmd", "stats"}})["control_socket"];
+  EXPECT_EQ(counters["clients_timed_out"], 1) << counters.dump();
+}
+
+// 16 clients at once are served; one more gets a "busy" reply at once; a
+// freed slot serves again.
+TEST_F(control_test, clients_beyond_the_bound_get_a_busy_reply_and_a_freed_slot_serves_again) {
+  std::vector<int> held;
+  for (int i = 0; i < 16; ++i) {
+    int fd = connect_raw(socket);
+    ASSERT_GE(fd, 0);
+    held.push_back(fd);
+    // Served (not just queued): each gets its answer.
+    ASSERT_TRUE(send_text(fd, "{\"cmd\":\"echo\"}\n"));
+    EXPECT_NE(read_line(fd).find("\"alpha\""), std::string::npos) << i;
+  }
+  auto out = raw_exchange(socket, "{\"cmd\":\"echo\"}\n", false, 5s, 1);
+  auto j = json::parse(out.substr(0, out.find('\n')), nullptr, false);
+  ASSERT_FALSE(j.is_discarded()) << out;
+  EXPECT_EQ(j["error"]["code"], "busy") << out;
+  EXPECT_NE(j["error"]["message"].get<std::string>().find("16"),
+            std::string::npos)
+    << out;
+  // The held clients are still served.
+  ASSERT_TRUE(send_text(held[3], "{\"cmd\":\"echo\"}\n"));
+  EXPECT_NE(read_line(held[3]).find("\"alpha\""), std::string::npos);
+  ::close(held.back());
+  held.pop_back();
+  ASSERT_TRUE(eventually([&] {
+    auto reply = control_call(socket, R"({"cmd":"echo"})", 5s);
+    return reply && reply->find("\"alpha\"") != std::string::npos;
+  }));
+  for (auto fd : held)
+    ::close(fd);
+  ASSERT_TRUE(eventually([&] {
+    auto c = result({{"cmd", "stats"}})["control_socket"];
+    return c["clients"] == 1; // the stats request's own
+  }));
+  auto c = result({{"cmd", "stats"}})["control_socket"];
+  EXPECT_GE(c["clients_refused"].get<int>(), 1) << c.dump();
+  EXPECT_EQ(c["max_clients"], 16) << c.dump();
+}
+
+// hermctl writes its whole request before it reads: an over-long line used
+// to be closed on while it was still writing (a reset, "cannot send the
+// request"). Now it reads the documented invalid_request reply.
+TEST_F(control_test, an_over_long_request_gets_the_invalid_request_reply_not_a_reset) {
+  auto big = R"({"cmd":"echo","pad":")" + std::string(300 * 1024, 'x') + R"("})";
+  auto reply = control_call(socket, big, 10s);
+  ASSERT_TRUE(reply) << render(reply.error());
+  auto j = json::parse(*reply, nullptr, false);
+  ASSERT_FALSE(j.is_discarded()) << reply->substr(0, 200);
+  EXPECT_EQ(j["error"]["code"], "invalid_request");
+  EXPECT_NE(j["error"]["message"].get<std::string>().find("65536"),
+            std::string::npos)
+    << *reply;
+  // Through hermctl as a user would meet it: one line, exit non-zero.
+  auto run = hermctl({"-s", socket, "--timeout", "5000", "link",
+                      std::string(100 * 1024, 'd'), "down"});
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find("longer than 65536 bytes"), std::string::npos)
+    << run.output.substr(0, 300);
+  auto counters = result({{"cmd", "stats"}})["control_socket"];
+  EXPECT_GE(counters["lines_too_long"].get<int>(), 1) << counters.dump();
+  EXPECT_EQ(result({{"cmd", "echo"}})["name"], "alpha");
+}
