@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "actors/config.hpp"
@@ -1003,3 +1004,99 @@ TEST(config, hermd_check_refuses_an_alias_bomb_with_exit_code_2) {
   EXPECT_NE(out.find("expands to more than 8 MiB"), std::string::npos) << out;
 }
 #endif
+
+#if defined(HERMD_BIN) && defined(HERMCTL_BIN)
+namespace {
+
+/// A hermctl run with stderr merged: exit status and output.
+std::pair<int, std::string> run_hermctl(const std::string& args) {
+  test::child_process p{{"/bin/sh", "-c",
+                         std::string{"exec '"} + HERMCTL_BIN + "' " + args
+                           + " 2>&1"}};
+  auto status = p.wait(std::chrono::seconds(30));
+  return {status, p.output()};
+}
+
+/// Peak resident memory of process `pid` (VmHWM), KiB; 0 if unknown.
+long peak_rss_kib(pid_t pid) {
+  std::ifstream in{"/proc/" + std::to_string(pid) + "/status"};
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0)
+      return std::atol(line.c_str() + 6);
+  return 0;
+}
+
+} // namespace
+
+// A running module asked to reload a 1 MiB alias bomb (15 GB expanded)
+// refuses it with file, line and field, without growing by the expansion,
+// and runs on with its old configuration.
+TEST(config, hermctl_reload_refuses_an_alias_bomb_and_the_module_runs_on) {
+  temp_dir dir;
+  auto sock = dir.path + "/m.sock";
+  auto head = "module: { name: m }\ncontrol: { socket: " + sock + " }\n";
+  auto file = dir.write("m.yaml", head);
+  test::child_process hermd{{HERMD_BIN, file}};
+  ASSERT_TRUE(hermd.started());
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(15);
+  int status = -1;
+  while (status != 0 && std::chrono::steady_clock::now() < deadline) {
+    status = run_hermctl("-s '" + sock + "' info").first;
+    if (status != 0)
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_EQ(status, 0) << "hermd did not come up";
+  auto before = peak_rss_kib(hermd.pid());
+  // 512 KiB anchored, then aliases of it up to 1000 KiB of file.
+  auto text = head + lines({"channels:", "  - name: a", "    kind: inproc",
+                            "    interface: seg"});
+  text += "    big: &s " + std::string(512 * 1024, 'x') + "\n";
+  for (int i = 0; text.size() < 1000 * 1024; ++i)
+    text += "    b" + std::to_string(i) + ": *s\n";
+  dir.write("m.yaml", text);
+  auto [code, out] = run_hermctl("-s '" + sock + "' reload");
+  EXPECT_NE(code, 0) << out;
+  EXPECT_NE(out.find(file + ":"), std::string::npos) << out;
+  EXPECT_NE(out.find(": channels[0].b"), std::string::npos) << out;
+  EXPECT_NE(out.find("expands to more than 8 MiB"), std::string::npos) << out;
+  auto after = peak_rss_kib(hermd.pid());
+  // The text is read (1 MiB) and parsed event by event, never expanded.
+  EXPECT_LT(after - before, 32 * 1024) << before << " KiB -> " << after << " KiB";
+  EXPECT_TRUE(hermd.running());
+  EXPECT_EQ(run_hermctl("-s '" + sock + "' info").first, 0);
+  ::kill(hermd.pid(), SIGTERM);
+  EXPECT_EQ(hermd.wait(std::chrono::seconds(15)), 0) << hermd.output();
+}
+#endif
+
+// module.limits: bounds on routing state (docs/user-guide.md), defaults
+// from routing_config and route_limits, each key checked for its range.
+TEST(config, reads_routing_limits_and_refuses_them_out_of_range) {
+  auto defaults = parse_ok(lines({"module:", "  name: m"})).module.routing;
+  EXPECT_EQ(defaults.limits.destinations, 4096u);
+  EXPECT_EQ(defaults.limits.per_neighbour, 1024u);
+  EXPECT_EQ(defaults.limits.routes, 16384u);
+  EXPECT_EQ(defaults.max_neighbours, 512u);
+  EXPECT_EQ(defaults.max_neighbours_per_channel, 128u);
+  auto r = parse_ok(lines({"module:", "  name: m", "  limits:",
+                           "    destinations: 100",
+                           "    destinations_per_neighbour: 50",
+                           "    routes: 400", "    neighbours: 20",
+                           "    neighbours_per_channel: 10"}))
+             .module.routing;
+  EXPECT_EQ(r.limits.destinations, 100u);
+  EXPECT_EQ(r.limits.per_neighbour, 50u);
+  EXPECT_EQ(r.limits.routes, 400u);
+  EXPECT_EQ(r.max_neighbours, 20u);
+  EXPECT_EQ(r.max_neighbours_per_channel, 10u);
+  EXPECT_EQ(parse_error(lines({"module:", "  name: m", "  limits:",
+                               "    destinations: 0"})),
+            "robot.yaml:4: module.limits.destinations: expected an integer "
+            "in [1, 65534], got '0'");
+  EXPECT_EQ(parse_error(lines({"module:", "  name: m", "  limits:",
+                               "    destination: 10"})),
+            "robot.yaml:4: module.limits.destination: unknown key (expected "
+            "destinations, destinations_per_neighbour, routes, neighbours or "
+            "neighbours_per_channel)");
+}
