@@ -29,6 +29,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include "caf/actor_system.hpp"
+#include "caf/actor_system_config.hpp"
+#include "caf/message.hpp"
+
+#include "actors/marshal.hpp"
+#include "actors/runtime/system.hpp"
 #include "channels/testing/loopback.hpp"
 #include "tests/adversarial/hostile_peer.hpp"
 #include "tests/support/process.hpp"
@@ -143,6 +149,10 @@ protected:
     std::ofstream{path} << "module:\n  name: " << name << "\n  id: " << id
                         << "\n  hello_interval_ms: 200\ncontrol:\n  socket: "
                         << sock(name) << "\n"
+                        // b's control service answers a's pings (the
+                        // legitimate traffic); a, the victim, keeps the
+                        // default: no remote control without a key.
+                        << (name == "b" ? "  allow_unsigned_remote: true\n" : "")
                         << extra
                         << "channels:\n  - name: eth0\n    kind: udp\n"
                            "    interface: 127.0.0.1:"
@@ -527,4 +537,60 @@ TEST_F(hostile_network, application_message_floods_from_forged_modules_are_bound
   ASSERT_FALSE(all.is_null());
   EXPECT_GT(sum_of(all, "rx_malformed"), 0u) << all.dump();
   EXPECT_GT(sum_of(all, "rx_unexpected_response"), 0u) << all.dump();
+}
+
+// Finding 3 of issue 14: in a keyed network (default `auth.data:
+// discovery`), one unsigned datagram delivered `link down` to the victim's
+// control service. The attacker here knows everything a sniffer could (the
+// control APO's number) and forges the request as if from b: it is refused
+// and counted, and the link stays up.
+TEST_F(hostile_network, a_forged_unsigned_control_request_in_a_keyed_network_is_refused) {
+  auto key = dir_ + "/net.key";
+  std::ofstream{key}
+    << "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff\n";
+  ::chmod(key.c_str(), 0600);
+  auto keyed = "auth:\n  key_file: " + key + "\n";
+  start(keyed, keyed);
+  // The control APO's number, as a sniffer of discovery answers learns it.
+  auto apps = ctl("apps");
+  uint32_t control_apo = 0;
+  std::function<void(const json&)> scan = [&](const json& x) {
+    if (x.is_object() && x.value("name", "") == "herm.control"
+        && x.contains("apo"))
+      control_apo = x["apo"].get<uint32_t>();
+    if (x.is_structured())
+      for (auto& v : x)
+        scan(v);
+  };
+  scan(apps);
+  ASSERT_NE(control_apo, 0u) << apps.dump();
+  caf::actor_system_config cfg;
+  configure(cfg);
+  caf::actor_system sys{cfg};
+  auto payload = marshal(
+    sys, caf::make_message(std::string{
+           R"({"cmd":"link","device":"eth0","state":"down"})"}));
+  ASSERT_TRUE(payload) << caf::to_string(payload.error());
+  hostile_socket x;
+  ASSERT_TRUE(x.ok());
+  auto peak = under_attack([&] {
+    for (uint64_t i = 0; i < 200; ++i) {
+      // Forged as b's and as an unknown module's, one-way and answered.
+      auto src = static_cast<module_id>(i % 2 == 0 ? 0x22 : 0x66);
+      x.send(pa_, asl_frame(src, 0x21,
+                            asl_request{i % 3 == 0 ? 0 : 0x1000 + i,
+                                        control_apo, *payload}));
+      x.send(pa_, asl_frame(src, 0x21,
+                            asl_reliable_request{0x5000 + i, control_apo,
+                                                 i % 2 == 0, *payload}));
+    }
+    std::this_thread::sleep_for(300ms);
+  });
+  expect_survived(peak);
+  auto channels = ctl("channels");
+  ASSERT_FALSE(channels.is_null());
+  auto text = channels.dump();
+  EXPECT_NE(text.find("\"state\":\"up\""), std::string::npos) << text;
+  auto all = all_stats();
+  EXPECT_GT(sum_of(all, "rx_unauthorized"), 0u) << all.dump();
 }
