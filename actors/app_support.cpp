@@ -17,6 +17,7 @@
 #include "actors/apo_proxy.hpp"
 #include "actors/app_table.hpp"
 #include "actors/runtime/error.hpp"
+#include "actors/unexpected.hpp"
 #include "actors/runtime/type_ids.hpp"
 
 namespace herm {
@@ -39,6 +40,8 @@ struct binding {
   time_point last_watch;
   /// Requests through this proxy travel in reliable mode.
   bool reliable = false;
+  /// ... and signed (apo_access::signed_only).
+  bool sign = false;
 };
 
 /// A request sent to a remote APO, waiting for its response.
@@ -79,6 +82,8 @@ struct cached_reply {
   bool oneway = false;
   /// When done and not one-way: sent again for every copy that arrives.
   asl_response response;
+  /// For a signed_only APO: the response travels signed.
+  bool sign = false;
 };
 
 using request_key = std::pair<module_id, uint64_t>;
@@ -90,6 +95,8 @@ struct served {
   time_point deadline;
   /// The response goes into the duplicate-suppression cache too.
   bool reliable = false;
+  /// For a signed_only APO: the response travels signed.
+  bool sign = false;
 };
 
 /// A discovery in progress.
@@ -138,14 +145,21 @@ struct asl_state {
   /// Local APOs: by number and by address.
   std::map<uint32_t, caf::actor> apos;
   std::map<caf::actor_addr, uint32_t> apo_of;
+  /// Local APOs registered apo_access::signed_only.
+  std::set<uint32_t> signed_only;
   std::map<uint32_t, binding> bindings;
   uint32_t next_binding = 1;
   std::map<uint64_t, outgoing> pending;
-  uint64_t next_request = 1;
+  /// Request and query ids go on the wire: not sequential, so that a
+  /// forged response or answer needs more than one packet sniffed.
+  std::unique_ptr<scrambled_sequence<uint64_t>> request_ids;
   std::map<uint64_t, served> serving;
   uint64_t next_served = 1;
   std::map<uint32_t, discovery> discoveries;
-  uint32_t next_query = 1;
+  std::unique_ptr<scrambled_sequence<uint32_t>> query_ids;
+  /// Why the routing agent stopped (then nothing can be sent: requests
+  /// fail at once with ec::unavailable).
+  caf::error agent_down;
   std::map<std::string, topic_state> topics;
   /// Modules with a route now, and since when others lost theirs.
   std::set<module_id> reachable;
@@ -210,6 +224,27 @@ void transmit(asl_impl self, module_id dst, const asl_message& msg,
   st.buf.clear();
   encode(msg, st.buf);
   self->send(st.agent, send_packet{dst, asl_protocol, priority, st.buf});
+}
+
+/// The same, signed in a keyed network whatever its `auth.data`
+/// (apo_access::signed_only traffic).
+void transmit_signed(asl_impl self, module_id dst, const asl_message& msg,
+                     bool sign = true) {
+  auto& st = self->state;
+  st.buf.clear();
+  encode(msg, st.buf);
+  self->send(st.agent,
+             send_packet{dst, asl_protocol, prio_normal, st.buf, sign});
+}
+
+/// ec::unavailable once the routing agent stopped, else none.
+caf::error agent_gone(asl_impl self) {
+  auto& st = self->state;
+  if (!st.agent_down)
+    return caf::none;
+  return make_error(ec::unavailable,
+                    "the routing agent of module " + to_hex(st.self_id)
+                      + " stopped (" + render(st.agent_down) + ")");
 }
 
 /// Delivers `msg` to `dst` as if `from` sent it with message id `mid`.
@@ -299,7 +334,8 @@ void bind_to(asl_impl self, binding& b, const apo_ref& ref) {
 
 /// A new proxy bound to `ref` (or, unbound, looking for `req`).
 caf::actor make_binding(asl_impl self, const apo_ref* ref,
-                        const bind_request* req, bool reliable = false) {
+                        const bind_request* req, bool reliable = false,
+                        bool sign = false) {
   auto& st = self->state;
   auto id = st.next_binding++;
   auto proxy = detail::make_apo_proxy(self->system(),
@@ -307,6 +343,7 @@ caf::actor make_binding(asl_impl self, const apo_ref* ref,
   auto& b = st.bindings[id];
   b.proxy = caf::actor_cast<caf::weak_actor_ptr>(proxy);
   b.reliable = reliable;
+  b.sign = sign;
   if (req != nullptr) {
     b.rebind = req->rebind;
     b.by = req->by;
@@ -340,9 +377,9 @@ void finish_discovery(asl_impl self, uint32_t qid) {
 void discover(asl_impl self, apo_query q,
               std::function<void(std::vector<apo_ref>)> finish) {
   auto& st = self->state;
-  auto qid = st.next_query++;
-  if (st.next_query == 0)
-    st.next_query = 1;
+  auto qid = st.query_ids->next();
+  while (st.discoveries.count(qid) != 0)
+    qid = st.query_ids->next();
   auto& d = st.discoveries[qid];
   d.query = q;
   d.finish = std::move(finish);
@@ -363,14 +400,20 @@ void on_answer(asl_impl self, module_id src, asl_answer& a) {
   ++st.stats.answers_received;
   auto now = self->clock().now();
   for (auto& e : a.entries)
-    st.table->learn(src, e, now);
+    if (!st.table->learn(src, e, now, st.cfg.max_remote_apos))
+      ++st.stats.remote_apos_refused;
   auto i = st.discoveries.find(a.query_id);
   if (i == st.discoveries.end())
     return;
   auto& d = i->second;
   for (auto& e : a.entries)
-    if (app_table::matches(d.query.by, d.query.pattern, e.name, e.type))
-      d.found.insert(apo_ref{src, e.apo, e.name, e.type});
+    if (app_table::matches(d.query.by, d.query.pattern, e.name, e.type)) {
+      apo_ref ref{src, e.apo, e.name, e.type};
+      if (d.found.size() >= st.cfg.max_remote_apos && d.found.count(ref) == 0)
+        ++st.stats.discovery_entries_refused;
+      else
+        d.found.insert(std::move(ref));
+    }
   if (d.query.first && !d.found.empty())
     finish_discovery(self, a.query_id);
 }
@@ -479,8 +522,9 @@ bool send_reliable(asl_impl self, uint64_t rid, outgoing& out, time_point now) {
   }
   ++out.sends;
   out.dst = target.module;
-  transmit(self, out.dst,
-           asl_reliable_request{rid, target.apo, out.oneway, out.payload});
+  transmit_signed(self, out.dst,
+                  asl_reliable_request{rid, target.apo, out.oneway, out.payload},
+                  b->second.sign);
   out.next_send = now + out.rto;
   return false;
 }
@@ -552,7 +596,7 @@ void forward_reliable(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
     return;
   }
   auto now = self->clock().now();
-  auto rid = st.next_request++;
+  auto rid = st.request_ids->next();
   outgoing out;
   out.sender = std::move(sender);
   out.mid = mid;
@@ -578,6 +622,10 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   auto i = st.bindings.find(id);
   if (i == st.bindings.end()) {
     refuse(self, sender, mid, make_error(ec::apo_gone, "binding ended"));
+    return;
+  }
+  if (auto err = agent_gone(self)) {
+    refuse(self, sender, mid, std::move(err));
     return;
   }
   auto& b = i->second;
@@ -615,8 +663,8 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
     return;
   if (!mid.is_request()) {
     ++st.stats.oneway_sent;
-    transmit(self, b.target.module,
-             asl_request{0, b.target.apo, std::move(*payload)});
+    transmit_signed(self, b.target.module,
+                    asl_request{0, b.target.apo, std::move(*payload)}, b.sign);
     return;
   }
   if (st.pending.size() >= st.cfg.max_pending) {
@@ -626,7 +674,7 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
                                         + " remote requests outstanding"));
     return;
   }
-  auto rid = st.next_request++;
+  auto rid = st.request_ids->next();
   outgoing out;
   out.sender = std::move(sender);
   out.mid = mid;
@@ -635,8 +683,8 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   out.deadline = self->clock().now() + st.cfg.request_timeout;
   st.pending.emplace(rid, std::move(out));
   ++st.stats.requests_sent;
-  transmit(self, b.target.module,
-           asl_request{rid, b.target.apo, std::move(*payload)});
+  transmit_signed(self, b.target.module,
+                  asl_request{rid, b.target.apo, std::move(*payload)}, b.sign);
 }
 
 asl_response error_response(uint64_t rid, const caf::error& err) {
@@ -648,10 +696,32 @@ asl_response error_response(uint64_t rid, const caf::error& err) {
 }
 
 void respond_error(asl_impl self, module_id dst, uint64_t rid,
-                   const caf::error& err) {
+                   const caf::error& err, bool sign = false) {
   if (rid == 0)
     return;
-  transmit(self, dst, error_response(rid, err));
+  transmit_signed(self, dst, error_response(rid, err), sign);
+}
+
+/// Whether a request for local APO `apo` that arrived from `src` (signed
+/// and verified: `authenticated`) may reach it; if not, it is counted and
+/// the requester gets ec::unauthorized.
+bool authorized(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
+                bool authenticated) {
+  auto& st = self->state;
+  if (st.signed_only.count(apo) == 0 || authenticated
+      || st.cfg.allow_unsigned_remote)
+    return true;
+  ++st.stats.rx_unauthorized;
+  auto entry = st.table->local(apo);
+  respond_error(self, src, rid,
+                make_error(ec::unauthorized,
+                           "APO '" + (entry ? entry->name : std::string{"?"})
+                             + "' of module " + to_hex(st.self_id)
+                             + " takes requests from other modules only signed "
+                               "with the network's key (on a module without "
+                               "a key: only with control.allow_unsigned_remote)"),
+                true);
+  return false;
 }
 
 // -- reliable mode: the receiver --------------------------------------------------
@@ -692,6 +762,7 @@ open_request(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
                                              + to_hex(st.self_id)));
     return std::nullopt;
   }
+  bool sign = st.signed_only.count(apo) != 0;
   auto msg = unmarshal(self->system(), payload.data(), payload.size(),
                        st.cfg.limits);
   if (!msg) {
@@ -702,7 +773,8 @@ open_request(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
     respond_error(self, src, rid,
                   make_error(static_cast<ec>(msg.error().code()),
                              "module " + to_hex(st.self_id) + ": "
-                               + context_of(msg.error())));
+                               + context_of(msg.error())),
+                  sign);
     return std::nullopt;
   }
   return std::pair{caf::actor_cast<caf::strong_actor_ptr>(a->second),
@@ -710,14 +782,16 @@ open_request(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
 }
 
 void on_reliable_request(asl_impl self, module_id src,
-                         asl_reliable_request& req) {
+                         asl_reliable_request& req, bool authenticated) {
   auto& st = self->state;
+  if (!authorized(self, src, req.request_id, req.apo, authenticated))
+    return;
   request_key key{src, req.request_id};
   if (auto c = st.cache.find(key); c != st.cache.end()) {
     // A copy of one that arrived before: never delivered again.
     ++st.stats.duplicates_suppressed;
     if (c->second.done && !c->second.oneway)
-      transmit(self, src, c->second.response);
+      transmit_signed(self, src, c->second.response, c->second.sign);
     else
       send_ack(self, src, req.request_id);
     return;
@@ -733,24 +807,30 @@ void on_reliable_request(asl_impl self, module_id src,
     send_ack(self, src, req.request_id);
     return;
   }
+  bool sign = st.signed_only.count(req.apo) != 0;
   if (st.serving.size() >= st.cfg.max_pending) {
     // Not remembered: a later copy may find room.
+    ++st.stats.serving_refused;
     respond_error(self, src, req.request_id,
                   make_error(ec::queue_full, "module " + to_hex(st.self_id)
-                                               + " is serving too many requests"));
+                                               + " is serving too many requests"),
+                  sign);
     return;
   }
-  remember(self, key, false, false);
+  remember(self, key, false, false).sign = sign;
   auto local = st.next_served++;
   st.serving.emplace(local, served{src, req.request_id,
                                    self->clock().now() + st.cfg.request_timeout,
-                                   true});
+                                   true, sign});
   ++st.stats.requests_served;
   post(self, dst, st.sink, caf::make_message_id(local), std::move(msg));
 }
 
-void on_request(asl_impl self, module_id src, asl_request& req) {
+void on_request(asl_impl self, module_id src, asl_request& req,
+                bool authenticated) {
   auto& st = self->state;
+  if (!authorized(self, src, req.request_id, req.apo, authenticated))
+    return;
   auto target = open_request(self, src, req.request_id, req.apo, req.payload);
   if (!target)
     return;
@@ -760,15 +840,19 @@ void on_request(asl_impl self, module_id src, asl_request& req) {
     post(self, dst, nullptr, caf::make_message_id(), std::move(msg));
     return;
   }
+  bool sign = st.signed_only.count(req.apo) != 0;
   if (st.serving.size() >= st.cfg.max_pending) {
+    ++st.stats.serving_refused;
     respond_error(self, src, req.request_id,
                   make_error(ec::queue_full, "module " + to_hex(st.self_id)
-                                               + " is serving too many requests"));
+                                               + " is serving too many requests"),
+                  sign);
     return;
   }
   auto local = st.next_served++;
   st.serving.emplace(local, served{src, req.request_id,
-                                   self->clock().now() + st.cfg.request_timeout});
+                                   self->clock().now() + st.cfg.request_timeout,
+                                   false, sign});
   ++st.stats.requests_served;
   post(self, dst, st.sink, caf::make_message_id(local), std::move(msg));
 }
@@ -783,7 +867,15 @@ void on_reply(asl_impl self, uint64_t local, caf::message& msg) {
   st.serving.erase(i);
   asl_response r;
   if (msg.match_elements<caf::error>()) {
-    r = error_response(s.origin_id, msg.get_as<caf::error>(0));
+    auto err = msg.get_as<caf::error>(0);
+    // CAF's own codes never reach a user: the APO exited before it could
+    // answer, or did not understand the request.
+    if (err == caf::sec::request_receiver_down)
+      err = make_error(ec::apo_gone, "the APO exited before it answered");
+    else if (err == caf::sec::unexpected_message)
+      err = make_error(ec::invalid_parameter,
+                       "the APO does not handle a message of this type");
+    r = error_response(s.origin_id, err);
   } else if (auto payload = marshal(self->system(), msg); !payload) {
     r = error_response(s.origin_id,
                        make_error(ec::invalid_parameter,
@@ -800,7 +892,7 @@ void on_reply(asl_impl self, uint64_t local, caf::message& msg) {
       c->second.done = true;
       c->second.response = r;
     }
-  transmit(self, s.origin, r);
+  transmit_signed(self, s.origin, r, s.sign);
 }
 
 void on_response(asl_impl self, module_id src, asl_response& r) {
@@ -909,6 +1001,7 @@ void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
     return;
   auto name = entry->name;
   auto watchers = st.table->remove_local(apo);
+  st.signed_only.erase(apo);
   if (auto a = st.apos.find(apo); a != st.apos.end()) {
     st.apo_of.erase(a->second.address());
     st.apos.erase(a);
@@ -1021,8 +1114,13 @@ void on_remote_publication(asl_impl self, module_id src, asl_publish& p) {
       return; // the same value again (a late joiner's copy)
     if (p.seq > last->second + 1)
       st.stats.publications_lost += p.seq - last->second - 1;
+    last->second = p.seq;
+  } else if (ts.last_seq.size() < st.cfg.max_topic_peers) {
+    ts.last_seq.emplace(src, p.seq);
+  } else {
+    // Delivered, but its gaps and repeats go unnoticed.
+    ++st.stats.publishers_refused;
   }
-  ts.last_seq[src] = p.seq;
   auto msg = unmarshal(self->system(), p.payload.data(), p.payload.size(),
                        st.cfg.limits);
   if (!msg) {
@@ -1044,6 +1142,10 @@ void on_remote_subscribe(asl_impl self, module_id src, const asl_subscribe& s) {
   auto lease = std::chrono::milliseconds(
     std::min<uint32_t>(s.lease_ms, 24 * 3600 * 1000));
   bool fresh = ts.remote_subs.count(src) == 0;
+  if (fresh && ts.remote_subs.size() >= st.cfg.max_topic_peers) {
+    ++st.stats.subscribers_refused;
+    return;
+  }
   ts.remote_subs[src] = self->clock().now() + lease;
   if (fresh && ts.has_last)
     send_publication(self, s.topic, ts, src); // a late joiner
@@ -1071,15 +1173,19 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
       } else if constexpr (std::is_same_v<T, asl_answer>) {
         on_answer(self, src, x);
       } else if constexpr (std::is_same_v<T, asl_request>) {
-        on_request(self, src, x);
+        on_request(self, src, x, pkt.authenticated);
       } else if constexpr (std::is_same_v<T, asl_response>) {
         on_response(self, src, x);
       } else if constexpr (std::is_same_v<T, asl_reliable_request>) {
-        on_reliable_request(self, src, x);
+        on_reliable_request(self, src, x, pkt.authenticated);
       } else if constexpr (std::is_same_v<T, asl_ack>) {
         on_ack(self, src, x);
       } else if constexpr (std::is_same_v<T, asl_watch>) {
-        if (!st.table->watch(x.apo, src))
+        bool refused = false;
+        if (st.table->watch(x.apo, src, st.cfg.max_watches, &refused)) {
+          if (refused)
+            ++st.stats.watches_refused;
+        } else
           transmit(self, src,
                    asl_down{x.apo, to_wire(make_error(
                                      ec::apo_gone,
@@ -1225,12 +1331,93 @@ void tick(asl_impl self) {
   self->delayed_send(self, st.cfg.tick, atom::tick_v);
 }
 
+/// The routing agent ended: nothing can be sent any more. Every request
+/// waiting for the network fails with ec::unavailable, proxies end with it,
+/// and so does anything asked later (the layer stays up to say why).
+void agent_stopped(asl_impl self, const caf::error& reason) {
+  auto& st = self->state;
+  st.agent_down = reason;
+  auto err = agent_gone(self);
+  for (auto& kv : st.pending)
+    post(self, kv.second.sender, nullptr, kv.second.mid.response_id(),
+         caf::make_message(err));
+  st.pending.clear();
+  for (auto& kv : st.bindings)
+    if (auto p = kv.second.proxy.lock())
+      if (detail::kill_apo_proxy(p, err, self->context()))
+        ++st.stats.proxies_ended;
+  st.bindings.clear();
+  std::vector<uint32_t> running;
+  for (auto& kv : st.discoveries)
+    running.push_back(kv.first);
+  for (auto qid : running)
+    finish_discovery(self, qid);
+}
+
 caf::error check_label(const std::string& what, const std::string& x) {
   if (x.empty() || x.size() > max_asl_string)
     return make_error(ec::invalid_parameter,
                       what + " must be 1 to 255 bytes, got "
                         + std::to_string(x.size()));
   return caf::none;
+}
+
+/// Registers local APO `apo` (the handlers of atom::add).
+caf::result<apo_ref> register_apo(asl_impl self, std::string name,
+                                  std::string type, caf::actor& apo,
+                                  apo_access access) {
+  auto& st = self->state;
+  if (auto err = check_label("an APO name", name))
+    return err;
+  if (auto err = check_label("an APO type", type))
+    return err;
+  if (!apo)
+    return make_error(ec::invalid_parameter, "invalid actor handle");
+  if (st.apo_of.count(apo.address()) != 0)
+    return make_error(ec::already_exists,
+                      "that actor is registered already (as '"
+                        + st.table->local(st.apo_of[apo.address()])->name
+                        + "')");
+  auto id = st.table->add_local(name, type);
+  st.apos.emplace(id, apo);
+  st.apo_of.emplace(apo.address(), id);
+  self->monitor(apo);
+  ++st.stats.registered;
+  if (access == apo_access::signed_only)
+    st.signed_only.insert(id);
+  if (st.self_id != no_module)
+    return apo_ref{st.self_id, id, std::move(name), std::move(type)};
+  // Right after start-up the module's id is not known here yet (the
+  // periodic refresh has not run): ask the agent before answering.
+  auto rp = self->make_response_promise<apo_ref>();
+  self->request(st.agent, caf::infinite, atom::get_v, atom::stats_v)
+    .then(
+      [self, rp, id, name, type](routing_stats& rs) mutable {
+        self->state.self_id = rs.self;
+        rp.deliver(apo_ref{rs.self, id, std::move(name), std::move(type)});
+      },
+      [self, rp, id, name, type](caf::error&) mutable {
+        rp.deliver(apo_ref{self->state.self_id, id, std::move(name),
+                           std::move(type)});
+      });
+  return rp;
+}
+
+/// The handlers of atom::bind with an apo_ref.
+caf::result<caf::actor> bind_ref(asl_impl self, const apo_ref& ref,
+                                 bool reliable, bool sign) {
+  auto& st = self->state;
+  if (ref.module == st.self_id) {
+    auto i = st.apos.find(ref.apo);
+    if (i == st.apos.end())
+      return make_error(ec::apo_gone, describe(ref));
+    return i->second;
+  }
+  if (auto err = agent_gone(self))
+    return err;
+  if (!reachable(self, ref.module))
+    return make_error(ec::no_route, "no route to module " + to_hex(ref.module));
+  return make_binding(self, &ref, nullptr, reliable, sign);
 }
 
 // -- the actor -------------------------------------------------------------------------
@@ -1241,17 +1428,25 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
   init.cfg = cfg;
   init.agent = agent;
   std::random_device rd;
-  init.table = std::make_unique<app_table>(rd() | 1);
-  init.next_query = rd() | 1;
-  init.next_request = (uint64_t{rd()} << 20) + 1;
+  auto key = [&rd] { return (uint64_t{rd()} << 32) | rd(); };
+  init.table = std::make_unique<app_table>(key());
+  init.query_ids = std::make_unique<scrambled_sequence<uint32_t>>(key());
+  init.request_ids = std::make_unique<scrambled_sequence<uint64_t>>(key());
   init.sink = detail::make_reply_sink(self->system(),
                                       caf::actor_cast<caf::actor>(self));
   self->send(agent, atom::subscribe_v, asl_protocol,
              caf::actor_cast<network_receiver_actor>(self));
   self->send(agent, atom::subscribe_v, atom::routes_v,
              caf::actor_cast<route_listener_actor>(self));
+  self->monitor(agent);
+  self->set_default_handler(log_unexpected);
   self->set_down_handler([self](caf::down_msg& msg) {
     auto& st = self->state;
+    if (msg.source == st.agent.address()) {
+      agent_stopped(self, msg.reason ? msg.reason
+                                     : make_error(ec::unavailable, "exited"));
+      return;
+    }
     if (auto i = st.apo_of.find(msg.source); i != st.apo_of.end())
       withdraw(self, i->second, msg.reason);
     drop_subscriber(self, msg.source, nullptr);
@@ -1260,39 +1455,12 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
   return {
     [self](atom::add, std::string& name, std::string& type,
            caf::actor& apo) -> caf::result<apo_ref> {
-      auto& st = self->state;
-      if (auto err = check_label("an APO name", name))
-        return err;
-      if (auto err = check_label("an APO type", type))
-        return err;
-      if (!apo)
-        return make_error(ec::invalid_parameter, "invalid actor handle");
-      if (st.apo_of.count(apo.address()) != 0)
-        return make_error(ec::already_exists,
-                          "that actor is registered already (as '"
-                            + st.table->local(st.apo_of[apo.address()])->name
-                            + "')");
-      auto id = st.table->add_local(name, type);
-      st.apos.emplace(id, apo);
-      st.apo_of.emplace(apo.address(), id);
-      self->monitor(apo);
-      ++st.stats.registered;
-      if (st.self_id != no_module)
-        return apo_ref{st.self_id, id, std::move(name), std::move(type)};
-      // Right after start-up the module's id is not known here yet (the
-      // periodic refresh has not run): ask the agent before answering.
-      auto rp = self->make_response_promise<apo_ref>();
-      self->request(st.agent, caf::infinite, atom::get_v, atom::stats_v)
-        .then(
-          [self, rp, id, name, type](routing_stats& rs) mutable {
-            self->state.self_id = rs.self;
-            rp.deliver(apo_ref{rs.self, id, std::move(name), std::move(type)});
-          },
-          [self, rp, id, name, type](caf::error&) mutable {
-            rp.deliver(apo_ref{self->state.self_id, id, std::move(name),
-                               std::move(type)});
-          });
-      return rp;
+      return register_apo(self, std::move(name), std::move(type), apo,
+                          apo_access::open);
+    },
+    [self](atom::add, std::string& name, std::string& type, caf::actor& apo,
+           apo_access access) -> caf::result<apo_ref> {
+      return register_apo(self, std::move(name), std::move(type), apo, access);
     },
     [self](atom::unregister, caf::actor& apo) {
       auto& st = self->state;
@@ -1318,6 +1486,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       return result;
     },
     [self](atom::find, apo_query& q) -> caf::result<std::vector<apo_ref>> {
+      if (auto err = agent_gone(self))
+        return err;
       if (q.by != query_by::any)
         if (auto err = check_label("a pattern", q.pattern))
           return err;
@@ -1330,30 +1500,18 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       return rp;
     },
     [self](atom::bind, apo_ref& ref) -> caf::result<caf::actor> {
-      auto& st = self->state;
-      if (ref.module == st.self_id) {
-        auto i = st.apos.find(ref.apo);
-        if (i == st.apos.end())
-          return make_error(ec::apo_gone, describe(ref));
-        return i->second;
-      }
-      if (!reachable(self, ref.module))
-        return make_error(ec::no_route, "no route to module " + to_hex(ref.module));
-      return make_binding(self, &ref, nullptr);
+      return bind_ref(self, ref, false, false);
     },
     [self](atom::bind, apo_ref& ref, bool reliable) -> caf::result<caf::actor> {
-      auto& st = self->state;
-      if (ref.module == st.self_id) {
-        auto i = st.apos.find(ref.apo);
-        if (i == st.apos.end())
-          return make_error(ec::apo_gone, describe(ref));
-        return i->second;
-      }
-      if (!reachable(self, ref.module))
-        return make_error(ec::no_route, "no route to module " + to_hex(ref.module));
-      return make_binding(self, &ref, nullptr, reliable);
+      return bind_ref(self, ref, reliable, false);
+    },
+    [self](atom::bind, apo_ref& ref,
+           apo_access access) -> caf::result<caf::actor> {
+      return bind_ref(self, ref, false, access == apo_access::signed_only);
     },
     [self](atom::bind, bind_request& req) -> caf::result<caf::actor> {
+      if (auto err = agent_gone(self))
+        return err;
       if (req.by != query_by::any)
         if (auto err = check_label("a pattern", req.pattern))
           return err;
@@ -1417,6 +1575,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       result.live_bindings = static_cast<uint32_t>(st.bindings.size());
       result.pending_requests = static_cast<uint32_t>(st.pending.size());
       result.cached_responses = static_cast<uint32_t>(st.cache.size());
+      result.watches = static_cast<uint32_t>(st.table->watches());
+      result.unexpected_messages = unexpected_messages();
       return result;
     },
     [self](packet_delivered& pkt) { on_packet(self, pkt); },

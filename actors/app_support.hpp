@@ -29,8 +29,9 @@
 namespace herm {
 
 /// An APO as the network knows it: the module hosting it, its number there
-/// (unique per module and never reused while the module runs), its name and
-/// its type (the interface it speaks).
+/// (unique per module and never reused while the module runs; not
+/// sequential, so that one number seen does not give away the others), its
+/// name and its type (the interface it speaks).
 struct apo_ref {
   module_id module = no_module;
   uint32_t apo = 0;
@@ -101,6 +102,22 @@ typename Inspector::result_type inspect(Inspector& f, bind_request& x) {
            x.timeout_ms, x.rebind, x.reliable);
 }
 
+/// Who may use a local APO from other modules, and how a binding speaks to
+/// its target.
+///
+/// `signed_only` (the control service, herm.control): a request from
+/// another module reaches the APO only if it arrived signed and verified
+/// (packet_delivered::authenticated, a keyed network, whatever its
+/// `auth.data`), or if this module has no key and
+/// app_support_config::allow_unsigned_remote is set. Anything else is
+/// refused with ec::unauthorized and counted (rx_unauthorized). A binding
+/// made `signed_only` asks the routing agent to sign its requests
+/// (send_packet::sign), and the APO's responses are signed too.
+enum class apo_access : uint8_t {
+  open = 0,
+  signed_only = 1,
+};
+
 /// One row of the application table, for hermctl and tests.
 struct apo_info {
   apo_ref ref;
@@ -147,6 +164,33 @@ struct app_support_stats {
   uint64_t rx_unexpected_response = 0;
   uint64_t tx_refused = 0;
   uint64_t dropped_no_route = 0;
+  // -- refusals at the bounds of what the network can make this module hold --
+  /// Requests for a `signed_only` APO (remote control) that did not arrive
+  /// signed, or reached a module without a key that does not allow
+  /// unsigned remote control: answered with ec::unauthorized.
+  uint64_t rx_unauthorized = 0;
+  /// Requests answered with ec::queue_full because max_pending requests of
+  /// other modules were being served.
+  uint64_t serving_refused = 0;
+  /// Discovery answer entries not remembered: the table of remote APOs
+  /// holds max_remote_apos (remote_apos_refused), or a discovery collected
+  /// max_remote_apos matches already (discovery_entries_refused).
+  uint64_t remote_apos_refused = 0;
+  uint64_t discovery_entries_refused = 0;
+  /// Watches of local APOs refused: max_watches held (the watcher learns
+  /// of an exit only by its periodic renewal finding the APO gone).
+  uint64_t watches_refused = 0;
+  /// Per topic: remote subscribers refused (this module publishes it) and
+  /// publishing modules not tracked (this module subscribes to it), above
+  /// max_topic_peers.
+  uint64_t subscribers_refused = 0;
+  uint64_t publishers_refused = 0;
+  /// Messages that actors of this process did not handle (APOs with
+  /// herm::log_unexpected as their default handler, actors/unexpected.hpp):
+  /// counted process-wide, logged at a bounded rate without their content.
+  uint64_t unexpected_messages = 0;
+  /// Watches of local APOs by other modules, now (at most max_watches).
+  uint32_t watches = 0;
   // -- reliable mode ----------------------------------------------------------
   /// Requests and one-way messages sent in reliable mode (first copies).
   uint64_t reliable_sent = 0;
@@ -184,7 +228,10 @@ typename Inspector::result_type inspect(Inspector& f, app_support_stats& x) {
            x.tx_refused, x.dropped_no_route, x.reliable_sent,
            x.retransmissions, x.duplicates_suppressed, x.acks_sent,
            x.acks_received, x.late_duplicates, x.reliable_waited,
-           x.cached_responses);
+           x.cached_responses, x.rx_unauthorized, x.serving_refused,
+           x.remote_apos_refused, x.discovery_entries_refused,
+           x.watches_refused, x.subscribers_refused, x.publishers_refused,
+           x.unexpected_messages, x.watches);
 }
 
 using app_support_actor = caf::typed_actor<
@@ -194,6 +241,9 @@ using app_support_actor = caf::typed_actor<
   /// ec::invalid_parameter (empty or over 255-byte name or type, invalid
   /// handle), ec::already_exists (that actor is registered already).
   caf::replies_to<atom::add, std::string, std::string, caf::actor>::with<apo_ref>,
+  /// The same, with who may use it from other modules (apo_access).
+  caf::replies_to<atom::add, std::string, std::string, caf::actor,
+                  apo_access>::with<apo_ref>,
   caf::reacts_to<atom::unregister, caf::actor>,
   /// The application table: local APOs and the remote ones discovered.
   caf::replies_to<atom::get, atom::apps>::with<std::vector<apo_info>>,
@@ -204,6 +254,9 @@ using app_support_actor = caf::typed_actor<
   caf::replies_to<atom::bind, apo_ref>::with<caf::actor>,
   /// The same, `true`: in reliable mode (see bind_request::reliable).
   caf::replies_to<atom::bind, apo_ref, bool>::with<caf::actor>,
+  /// The same, speaking to a `signed_only` APO (apo_access): requests and
+  /// their responses travel signed in a keyed network.
+  caf::replies_to<atom::bind, apo_ref, apo_access>::with<caf::actor>,
   caf::replies_to<atom::bind, bind_request>::with<caf::actor>,
   // -- topics -------------------------------------------------------------------
   /// Publishes one value of a topic to every subscriber, local and remote.
@@ -253,6 +306,20 @@ struct app_support_config {
   size_t max_pending = 4096;
   /// Bounds on what arrives.
   unmarshal_limits limits;
+  /// Most remote APOs remembered from discovery answers (refreshed entries
+  /// always fit), and most matches one discovery collects.
+  size_t max_remote_apos = 4096;
+  /// Most watches of local APOs by other modules, over all APOs.
+  size_t max_watches = 4096;
+  /// Per topic: most remote subscribers (publisher side) and most
+  /// publishing modules tracked (subscriber side).
+  size_t max_topic_peers = 1024;
+  /// A module WITHOUT a key: let requests from other modules reach its
+  /// `signed_only` APOs (its control service: anyone who can send it a
+  /// datagram can then administer it). Off by default; config key
+  /// `control.allow_unsigned_remote`, which a keyed module refuses. In a
+  /// keyed module (never set it there) remote control must arrive signed.
+  bool allow_unsigned_remote = false;
   // -- reliable mode ------------------------------------------------------------
   /// First retransmission timeout to a module whose round trip has not been
   /// measured yet; then RTO = SRTT + 4 RTTVAR (RFC 6298, samples only from

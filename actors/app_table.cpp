@@ -2,15 +2,15 @@
 
 namespace herm {
 
-app_table::app_table(uint32_t first) : next_(first != 0 ? first : 1) {
+app_table::app_table(uint64_t key) : numbers_(key) {
   // nop
 }
 
 uint32_t app_table::add_local(std::string name, std::string type) {
-  // Skip 0 and numbers still in use after a wrap.
-  while (next_ == 0 || locals_.count(next_) != 0)
-    ++next_;
-  auto apo = next_++;
+  // Skip numbers still in use after a wrap.
+  auto apo = numbers_.next();
+  while (locals_.count(apo) != 0)
+    apo = numbers_.next();
   locals_.emplace(apo, local_entry{std::move(name), std::move(type), {}});
   return apo;
 }
@@ -20,6 +20,7 @@ std::set<module_id> app_table::remove_local(uint32_t apo) {
   if (i == locals_.end())
     return {};
   auto result = std::move(i->second.watchers);
+  watches_ -= result.size();
   locals_.erase(i);
   return result;
 }
@@ -51,27 +52,47 @@ std::vector<asl_entry> app_table::match(query_by by,
   return result;
 }
 
-bool app_table::watch(uint32_t apo, module_id m) {
+bool app_table::watch(uint32_t apo, module_id m, size_t max_watches,
+                      bool* refused) {
   auto i = locals_.find(apo);
   if (i == locals_.end())
     return false;
-  i->second.watchers.insert(m);
+  auto& ws = i->second.watchers;
+  if (ws.count(m) == 0) {
+    if (watches_ >= max_watches) {
+      if (refused != nullptr)
+        *refused = true;
+      return true;
+    }
+    ws.insert(m);
+    ++watches_;
+  }
   return true;
 }
 
 void app_table::unwatch(uint32_t apo, module_id m) {
   auto i = locals_.find(apo);
   if (i != locals_.end())
-    i->second.watchers.erase(m);
+    watches_ -= i->second.watchers.erase(m);
 }
 
 void app_table::drop_watcher(module_id m) {
   for (auto& kv : locals_)
-    kv.second.watchers.erase(m);
+    watches_ -= kv.second.watchers.erase(m);
 }
 
-void app_table::learn(module_id m, const asl_entry& e, time_point now) {
-  remotes_[{m, e.apo}] = remote_entry{e.name, e.type, now};
+bool app_table::learn(module_id m, const asl_entry& e, time_point now,
+                      size_t max_remotes) {
+  auto key = std::make_pair(m, e.apo);
+  auto i = remotes_.find(key);
+  if (i == remotes_.end()) {
+    if (remotes_.size() >= max_remotes)
+      return false;
+    remotes_.emplace(key, remote_entry{e.name, e.type, now});
+    return true;
+  }
+  i->second = remote_entry{e.name, e.type, now};
+  return true;
 }
 
 void app_table::forget(module_id m, uint32_t apo) {

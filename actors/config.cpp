@@ -382,7 +382,11 @@ public:
 
   /// Returns true when the section names a socket (or turns it off).
   bool control(const field& f, file_config& cfg) const {
-    auto fs = entries(f.value, f.path, f.key_line, "a map", {"socket"});
+    auto fs = entries(f.value, f.path, f.key_line, "a map",
+                      {"socket", "allow_unsigned_remote"});
+    if (auto* u = find(fs, "control.allow_unsigned_remote"))
+      cfg.module.apps.allow_unsigned_remote
+        = choice(*u, {"true", "false"}) == "true";
     auto* x = find(fs, "control.socket");
     if (x == nullptr)
       return false;
@@ -533,6 +537,15 @@ public:
     }
     if (!has_socket)
       cfg.control_socket = default_control_socket(cfg.name);
+    // A keyed module takes remote control only signed: no way around it.
+    if (cfg.module.apps.allow_unsigned_remote && cfg.module.routing.auth.enabled())
+      for (auto& f : fs)
+        if (f.path == "control")
+          for (auto& x : entries(f.value, f.path, f.key_line, "a map"))
+            if (x.path == "control.allow_unsigned_remote")
+              fail(x.line(), x.path,
+                   "expected false with auth (a keyed module takes remote "
+                   "control only signed), got 'true'");
     return cfg;
   }
 

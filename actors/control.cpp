@@ -23,6 +23,7 @@
 
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/type_ids.hpp"
+#include "actors/unexpected.hpp"
 #include "routing/metric.hpp"
 
 namespace herm {
@@ -56,9 +57,22 @@ std::string error_reply(const std::string& code, const std::string& message) {
                    {"error", {{"code", code}, {"message", message}}}});
 }
 
+/// CAF's codes a user could meet, as HERM's own: an actor of this module
+/// that stopped is ec::unavailable, a request that timed out ec::timeout.
+caf::error herm_error(const caf::error& err) {
+  if (err == caf::sec::request_receiver_down)
+    return make_error(ec::unavailable,
+                      "a core actor of this module (IO manager, routing agent "
+                      "or application support) has stopped");
+  if (err == caf::sec::request_timeout)
+    return make_error(ec::timeout, "no answer in time");
+  return err;
+}
+
 /// "no_route" for herm's errors, "timeout" for CAF's request timeout,
 /// "system.NAME" for CAF's other errors.
-std::string error_code(const caf::error& err) {
+std::string error_code(const caf::error& raw) {
+  auto err = herm_error(raw);
   if (!err)
     return "none";
   if (err.category() == caf::atom("herm"))
@@ -71,7 +85,8 @@ std::string error_code(const caf::error& err) {
 }
 
 /// The error's context when it is a sentence, else the whole rendering.
-std::string error_message(const caf::error& err) {
+std::string error_message(const caf::error& raw) {
+  auto err = herm_error(raw);
   if (err && err.context().match_elements<std::string>())
     return err.context().get_as<std::string>(0);
   return render(err);
@@ -218,6 +233,15 @@ json to_json(const app_support_stats& s) {
           {"rx_unexpected_response", s.rx_unexpected_response},
           {"tx_refused", s.tx_refused},
           {"dropped_no_route", s.dropped_no_route},
+          {"rx_unauthorized", s.rx_unauthorized},
+          {"serving_refused", s.serving_refused},
+          {"remote_apos_refused", s.remote_apos_refused},
+          {"discovery_entries_refused", s.discovery_entries_refused},
+          {"watches", s.watches},
+          {"watches_refused", s.watches_refused},
+          {"subscribers_refused", s.subscribers_refused},
+          {"publishers_refused", s.publishers_refused},
+          {"unexpected_messages", s.unexpected_messages},
           {"reliable", {{"sent", s.reliable_sent},
                         {"retransmissions", s.retransmissions},
                         {"duplicates_suppressed", s.duplicates_suppressed},
@@ -371,7 +395,9 @@ void resolve(control_impl self, module_id target, module_id self_id,
                                        + " (not reachable or no control service)");
   };
   auto bind = [self, target, timeout, next](apo_ref ref) {
-    self->request(self->state.m.apps, timeout, atom::bind_v, ref)
+    // Remote control travels signed in a keyed network (apo_access).
+    self->request(self->state.m.apps, timeout, atom::bind_v, ref,
+                  apo_access::signed_only)
       .then(
         [self, target, next](caf::actor& proxy) {
           self->state.proxies[target] = proxy;
@@ -855,9 +881,14 @@ control_actor::behavior_type control_fun(control_impl self, module_handles m,
   self->state.m = std::move(m);
   self->state.module_name = std::move(module_name);
   self->state.started = clock_type::now();
+  // Anything but a request line comes from another module's mistake or
+  // malice: counted and logged at a bounded rate, never printed whole.
+  self->set_default_handler(log_unexpected);
+  // Other modules reach it only by signed requests, or unsigned ones when
+  // this module has no key and allows them (apo_access::signed_only).
   self->request(self->state.m.apps, std::chrono::seconds(10), atom::add_v,
                 std::string{control_apo_name}, std::string{control_apo_type},
-                caf::actor_cast<caf::actor>(self))
+                caf::actor_cast<caf::actor>(self), apo_access::signed_only)
     .then([self](apo_ref&) { self->state.registered = "yes"; },
           [self](caf::error& err) { self->state.registered = render(err); });
   return {

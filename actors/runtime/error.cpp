@@ -33,6 +33,8 @@ const char* to_string(ec x) {
     case ec::unknown_type: return "unknown_type";
     case ec::apo_gone: return "apo_gone";
     case ec::not_found: return "not_found";
+    case ec::unauthorized: return "unauthorized";
+    case ec::unavailable: return "unavailable";
   }
   return "unknown_error_code";
 }

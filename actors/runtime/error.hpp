@@ -47,6 +47,14 @@ enum class ec : uint8_t {
   apo_gone,
   /// Nothing matched (discovery found no application object).
   not_found,
+  /// The receiver refuses the request from where it came: remote control
+  /// that did not arrive signed in a keyed network, or reached a module
+  /// without a key that does not allow unsigned remote control
+  /// (docs/user-guide.md, "auth").
+  unauthorized,
+  /// A core actor of a module (IO manager, routing agent, application
+  /// support) has stopped: nothing will serve the request.
+  unavailable,
 };
 
 /// Returns the enumerator's name, e.g. "unknown_device".

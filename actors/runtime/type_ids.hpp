@@ -65,5 +65,6 @@ CAF_BEGIN_TYPE_ID_BLOCK(herm, caf::first_custom_type_id)
   CAF_ADD_TYPE_ID(herm, (std::vector<herm::apo_info>))
   CAF_ADD_TYPE_ID(herm, (herm::app_support_stats))
   CAF_ADD_TYPE_ID(herm, (herm::app_support_actor))
+  CAF_ADD_TYPE_ID(herm, (herm::apo_access))
 
 CAF_END_TYPE_ID_BLOCK(herm)

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <deque>
+#include <functional>
 
 #include <spdlog/spdlog.h>
 
@@ -13,6 +15,7 @@
 #include "caf/stateful_actor.hpp"
 
 #include "actors/runtime/error.hpp"
+#include "actors/unexpected.hpp"
 #include "apps/hermd/testbed_types.hpp"
 #include "routing/module_id.hpp"
 
@@ -68,25 +71,47 @@ caf::error only_options(const apo_config& cfg, std::vector<std::string> known) {
 
 // -- binding to a remote APO -----------------------------------------------------
 
-/// A binding by name that survives its target's restarts (rebind).
+/// A binding by name that survives its target's restarts (rebind), and
+/// what its APO had to send before the binding was made: held, in order,
+/// and sent once it is (so nothing is lost at start-up). At most
+/// `max_held`; what a full hold refuses is counted in `refused`.
+template <class T>
 struct binding {
+  static constexpr size_t max_held = 16;
   caf::actor proxy;
   bool pending = false;
+  std::deque<T> held;
+  uint64_t refused = 0;
+
+  /// Holds `x` until the binding is made; false (counted) when full.
+  bool hold(T x) {
+    if (held.size() >= max_held) {
+      ++refused;
+      return false;
+    }
+    held.push_back(std::move(x));
+    return true;
+  }
 };
 
-template <class Self>
-void ensure_bound(Self* self, binding& b, const app_support_actor& apps,
-                  const std::string& target) {
+/// Binds `b` to the APO named `target` unless bound or binding already;
+/// `flush` runs once bound (to send what was held).
+template <class Self, class T>
+void ensure_bound(Self* self, binding<T>& b, const app_support_actor& apps,
+                  const std::string& target,
+                  std::function<void()> flush = nullptr) {
   if (b.proxy || b.pending)
     return;
   b.pending = true;
   self->request(apps, 5s, atom::bind_v,
                 bind_request{query_by::name, target, 1000, true})
     .then(
-      [self, &b, target](caf::actor& proxy) {
+      [self, &b, target, flush](caf::actor& proxy) {
         b.pending = false;
         b.proxy = proxy;
         spdlog::info("bound to APO '{}'", target);
+        if (flush)
+          flush();
       },
       [&b, target](caf::error& err) {
         b.pending = false;
@@ -104,6 +129,7 @@ struct collector_state {
 };
 
 caf::behavior collector(caf::stateful_actor<collector_state>* self) {
+  self->set_default_handler(log_unexpected);
   return {
     [self](const sonar_batch& b) -> uint32_t {
       ++self->state.batches;
@@ -144,7 +170,7 @@ struct sonar_state {
   uint32_t batches = 0;
   uint64_t malformed = 0;
   channel_actor line;
-  binding target;
+  binding<sonar_batch> target;
 };
 
 using sonar_actor = caf::stateful_actor<sonar_state>;
@@ -212,16 +238,46 @@ void open_sensor_line(sonar_actor* self) {
       });
 }
 
+void request_batch(sonar_actor* self, sonar_batch b);
+
+/// Sends what was held while the binding was being made.
+void flush_batches(sonar_actor* self) {
+  auto& st = self->state;
+  while (st.target.proxy && !st.target.held.empty()) {
+    auto b = std::move(st.target.held.front());
+    st.target.held.pop_front();
+    request_batch(self, std::move(b));
+  }
+}
+
+void bind_target(sonar_actor* self) {
+  auto& st = self->state;
+  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target,
+               [self] { flush_batches(self); });
+}
+
 void send_batch(sonar_actor* self) {
   auto& st = self->state;
   sonar_batch b{st.ctx.module_name, ++st.batches, st.first_seq, std::move(st.readings)};
   st.readings.clear();
-  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target);
+  bind_target(self);
   if (!st.target.proxy) {
-    spdlog::warn("{}: sonar batch {} dropped: '{}' not bound yet", st.apo_name,
-                 b.batch, st.opt.target);
+    auto n = b.batch;
+    if (st.target.hold(std::move(b)))
+      spdlog::info("{}: sonar batch {} held until '{}' is bound ({} held)",
+                   st.apo_name, n, st.opt.target, st.target.held.size());
+    else
+      spdlog::warn("{}: sonar batch {} dropped: '{}' not bound yet and {} "
+                   "batches held already ({} dropped so far)",
+                   st.apo_name, n, st.opt.target, st.target.held.size(),
+                   st.target.refused);
     return;
   }
+  request_batch(self, std::move(b));
+}
+
+void request_batch(sonar_actor* self, sonar_batch b) {
+  auto& st = self->state;
   auto t0 = std::chrono::steady_clock::now();
   auto n = b.batch;
   spdlog::info("{}: sonar batch {} ({} readings) -> '{}'", st.apo_name, n,
@@ -258,8 +314,9 @@ caf::behavior srf04_batcher(sonar_actor* self, apo_context ctx,
   self->attach_functor([io = st.ctx.module.io, dev = "sonar:" + st.apo_name] {
     caf::anon_send(io, atom::close_v, dev);
   });
+  self->set_default_handler(log_unexpected);
   open_sensor_line(self);
-  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target);
+  bind_target(self);
   return {
     [self](packet_received& pkt) {
       auto& s = self->state;
@@ -300,7 +357,7 @@ struct vision_state {
   apo_context ctx;
   std::string apo_name;
   uint32_t seq = 0;
-  binding target;
+  binding<vision_frame> target;
 };
 
 using vision_actor = caf::stateful_actor<vision_state>;
@@ -321,13 +378,47 @@ caf::expected<vision_options> vision_opts(const apo_config& cfg) {
   return o;
 }
 
+void request_frame(vision_actor* self, vision_frame f) {
+  auto& st = self->state;
+  auto seq = f.seq;
+  auto t0 = std::chrono::steady_clock::now();
+  spdlog::info("{}: vision frame {} ({} bytes) -> '{}'", st.apo_name, seq,
+               f.data.size(), st.opt.target);
+  self->request(st.target.proxy, std::chrono::milliseconds(st.opt.period_ms),
+                std::move(f))
+    .then(
+      [self, seq, t0](uint32_t) {
+        auto us = std::chrono::duration_cast<std::chrono::microseconds>(
+                    std::chrono::steady_clock::now() - t0)
+                    .count();
+        spdlog::info("{}: vision frame {} acknowledged ({:.1f} ms)",
+                     self->state.apo_name, seq, us / 1000.0);
+      },
+      [self, seq](caf::error& err) {
+        spdlog::warn("{}: vision frame {} failed: {}", self->state.apo_name,
+                     seq, render(err));
+      });
+}
+
+/// Sends what was held while the binding was being made.
+void flush_frames(vision_actor* self) {
+  auto& st = self->state;
+  while (st.target.proxy && !st.target.held.empty()) {
+    auto f = std::move(st.target.held.front());
+    st.target.held.pop_front();
+    request_frame(self, std::move(f));
+  }
+}
+
 caf::behavior vision_source(vision_actor* self, apo_context ctx,
                             vision_options opt, std::string apo_name) {
   auto& init = self->state;
   init.ctx = std::move(ctx);
   init.opt = std::move(opt);
   init.apo_name = std::move(apo_name);
-  ensure_bound(self, init.target, init.ctx.module.apps, init.opt.target);
+  self->set_default_handler(log_unexpected);
+  ensure_bound(self, init.target, init.ctx.module.apps, init.opt.target,
+               [self] { flush_frames(self); });
   self->delayed_send(self, std::chrono::milliseconds(init.opt.period_ms),
                      atom::tick_v);
   return {
@@ -336,41 +427,41 @@ caf::behavior vision_source(vision_actor* self, apo_context ctx,
       self->delayed_send(self, std::chrono::milliseconds(st.opt.period_ms),
                          atom::tick_v);
       auto seq = ++st.seq;
-      ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target);
-      if (!st.target.proxy) {
-        spdlog::warn("{}: vision frame {} dropped: '{}' not bound yet",
-                     st.apo_name, seq, st.opt.target);
-        return;
-      }
       vision_frame f{st.ctx.module_name, seq, std::vector<uint8_t>(st.opt.bytes)};
       for (size_t i = 0; i < f.data.size(); ++i)
         f.data[i] = static_cast<uint8_t>(seq + i);
-      auto t0 = std::chrono::steady_clock::now();
-      spdlog::info("{}: vision frame {} ({} bytes) -> '{}'", st.apo_name, seq,
-                   f.data.size(), st.opt.target);
-      self->request(st.target.proxy, std::chrono::milliseconds(st.opt.period_ms),
-                    std::move(f))
-        .then(
-          [self, seq, t0](uint32_t) {
-            auto us = std::chrono::duration_cast<std::chrono::microseconds>(
-                        std::chrono::steady_clock::now() - t0)
-                        .count();
-            spdlog::info("{}: vision frame {} acknowledged ({:.1f} ms)",
-                         self->state.apo_name, seq, us / 1000.0);
-          },
-          [self, seq](caf::error& err) {
-            spdlog::warn("{}: vision frame {} failed: {}", self->state.apo_name,
-                         seq, render(err));
-          });
+      ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target,
+                   [self] { flush_frames(self); });
+      if (!st.target.proxy) {
+        if (st.target.hold(std::move(f)))
+          spdlog::info("{}: vision frame {} held until '{}' is bound",
+                       st.apo_name, seq, st.opt.target);
+        else
+          spdlog::warn("{}: vision frame {} dropped: '{}' not bound yet and "
+                       "{} frames held already ({} dropped so far)",
+                       st.apo_name, seq, st.opt.target, st.target.held.size(),
+                       st.target.refused);
+        return;
+      }
+      request_frame(self, std::move(f));
     },
   };
 }
 
 // -- echo --------------------------------------------------------------------------
 
-caf::behavior echo(caf::event_based_actor*) {
+/// Answers any request with its own content, whatever its types (a
+/// string, a struct, several values); one-way messages have nobody to go
+/// back to and are dropped.
+caf::behavior echo(caf::event_based_actor* self) {
+  self->set_default_handler(
+    [](caf::scheduled_actor*, caf::message_view& x) -> caf::result<caf::message> {
+      return x.move_content_to_message();
+    });
+  // A behavior must not be empty (the actor would end at once): strings
+  // are the usual probe.
   return {
-    [](caf::message& msg) -> caf::message { return std::move(msg); },
+    [](std::string& text) { return text; },
   };
 }
 

@@ -9,8 +9,10 @@
 #include "caf/event_based_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
 
+#include "actors/app_table.hpp"
 #include "actors/asl_wire.hpp"
 #include "actors/marshal.hpp"
+#include "actors/unexpected.hpp"
 #include "actors/testing/sim_apps.hpp"
 #include "tests/support/actor_fixture.hpp"
 
@@ -302,12 +304,12 @@ TEST_F(asl_test, failures_arrive_as_typed_errors) {
   ASSERT_FALSE(own);
   EXPECT_TRUE(is(own.error(), ec::invalid_parameter)) << render(own.error());
   EXPECT_NE(render(own.error()).find("calculators do not get"), std::string::npos);
-  // A message the APO has no handler for: CAF's unexpected_message.
+  // A message the APO has no handler for: HERM's invalid_parameter (CAF's
+  // own codes never reach a user).
   auto unexpected = ask<int32_t>(*proxy, 1s, 1.5);
   ASSERT_FALSE(unexpected);
-  EXPECT_EQ(unexpected.error().category(), caf::atom("system"));
-  EXPECT_EQ(unexpected.error().code(),
-            static_cast<uint8_t>(caf::sec::unexpected_message));
+  EXPECT_TRUE(is(unexpected.error(), ec::invalid_parameter))
+    << render(unexpected.error());
   // Something that cannot be marshalled (an actor handle) is refused here.
   auto refused = ask<int32_t>(*proxy, 1s, *proxy);
   ASSERT_FALSE(refused);
@@ -948,4 +950,283 @@ TEST_F(asl_reliable_test, a_sender_holds_at_most_max_pending_requests) {
   for (auto& a : answers)
     EXPECT_EQ(a->size(), 1u);
   EXPECT_EQ(stats(0).pending_requests, 0u);
+}
+
+// -- hostile input: remote control, bounds, guessable ids ------------------------------
+//
+// Module 1 runs an ASL; module 0 runs none and speaks protocol 1 by hand
+// (raw), or packets are handed to the ASL as the routing agent would, with
+// any source and with or without a verified signature.
+
+class asl_hostile_test : public asl_reliable_test {
+public:
+  /// Hands `msg` to module 1's ASL as if the agent delivered it from `src`.
+  void inject(module_id src, const asl_message& msg, bool authenticated) {
+    byte_buffer bytes;
+    encode(msg, bytes);
+    caf::anon_send(asl(1), packet_delivered{src, asl_protocol, prio_normal, 1,
+                                            bytes, authenticated});
+    run();
+  }
+
+  apo_ref add_signed_only(size_t module, const std::string& name,
+                          caf::actor apo) {
+    auto res = call<apo_ref>(asl(module), atom::add_v, name, std::string{"t"},
+                             apo, apo_access::signed_only);
+    EXPECT_TRUE(res) << render(res.error());
+    return res ? std::get<0>(*res) : apo_ref{};
+  }
+
+  std::vector<asl_response> responses() {
+    return raw.received<asl_response>();
+  }
+};
+
+TEST_F(asl_hostile_test, a_signed_only_apo_takes_remote_requests_only_when_signed) {
+  build_half_raw(1);
+  auto log = std::make_shared<seen>();
+  auto ref = add_signed_only(1, "herm.control", spawn_calculator(log));
+  auto hello = payload_of(caf::make_message(std::string{"link down"}));
+  // Unsigned (a host without the key, or a keyless module): refused with a
+  // typed error, counted, never delivered; one-way and reliable alike.
+  inject(id_of(0), asl_request{41, ref.apo, hello}, false);
+  inject(id_of(0), asl_request{0, ref.apo, hello}, false);
+  inject(id_of(0), asl_reliable_request{42, ref.apo, false, hello}, false);
+  EXPECT_TRUE(log->texts.empty());
+  EXPECT_EQ(stats(1).rx_unauthorized, 3u);
+  EXPECT_EQ(stats(1).requests_served, 0u);
+  auto rs = responses();
+  ASSERT_EQ(rs.size(), 2u);
+  for (auto& r : rs) {
+    EXPECT_FALSE(r.ok);
+    EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::unauthorized));
+    EXPECT_NE(r.error.context.find("herm.control"), std::string::npos);
+  }
+  // Signed and verified: served.
+  inject(id_of(0), asl_request{43, ref.apo, hello}, true);
+  EXPECT_EQ(log->texts, std::vector<std::string>{"link down"});
+  rs = responses();
+  ASSERT_EQ(rs.size(), 3u);
+  EXPECT_TRUE(rs[2].ok);
+  // An open APO takes unsigned requests as before.
+  auto open = add(1, "calc", "t", spawn_calculator(log));
+  inject(id_of(0), asl_request{44, open.apo, hello}, false);
+  EXPECT_EQ(log->texts.size(), 2u);
+  EXPECT_EQ(stats(1).rx_unauthorized, 3u);
+}
+
+TEST_F(asl_hostile_test, a_keyless_module_serves_remote_control_only_when_its_config_allows) {
+  cfg.allow_unsigned_remote = true;
+  build_half_raw(1);
+  auto log = std::make_shared<seen>();
+  auto ref = add_signed_only(1, "herm.control", spawn_calculator(log));
+  inject(id_of(0), asl_request{41, ref.apo,
+                               payload_of(caf::make_message(std::string{"x"}))},
+         false);
+  EXPECT_EQ(log->texts, std::vector<std::string>{"x"});
+  EXPECT_EQ(stats(1).rx_unauthorized, 0u);
+}
+
+TEST_F(asl_hostile_test, signed_only_bindings_ask_the_keyed_agent_to_sign_in_every_data_mode) {
+  // Both modules keyed, auth.data: discovery (unicast requests are not
+  // signed unless asked).
+  net = std::make_unique<sim_network>(*this, test_prefix());
+  net->add_module(id_of(0));
+  net->add_module(id_of(1));
+  for (size_t i = 0; i < 2; ++i)
+    net->at(i).cfg.auth.key = std::vector<uint8_t>(32, 0x33);
+  net->connect({0, 1}, "ethernet");
+  net->on_start = [this](size_t i, sim_network::module& m) {
+    if (i == 0)
+      m.apps = caf::actor_cast<caf::actor>(
+        track(spawn_app_support(sys(), m.agent, cfg)));
+  };
+  net->start();
+  net->advance(3s);
+  auto got = raw.got;
+  auto rcv = track(sys().spawn(
+    [got](network_receiver_actor::pointer) -> network_receiver_actor::behavior_type {
+      return {[got](packet_delivered& x) { got->push_back(std::move(x)); }};
+    }));
+  caf::anon_send(net->at(1).agent, atom::subscribe_v, asl_protocol, rcv);
+  run();
+  apo_ref target{id_of(1), 7, "herm.control", "herm.control/1"};
+  auto plain = call<caf::actor>(asl(0), atom::bind_v, target);
+  auto signed_ = call<caf::actor>(asl(0), atom::bind_v, target,
+                                  apo_access::signed_only);
+  ASSERT_TRUE(plain && signed_);
+  start_request<std::string>(std::get<0>(*plain), std::string{"a"});
+  start_request<std::string>(std::get<0>(*signed_), std::string{"b"});
+  net->advance(100ms);
+  std::vector<bool> authenticated;
+  for (auto& pkt : *got) {
+    auto m = decode_asl(pkt.payload.data(), pkt.payload.size());
+    if (m && std::holds_alternative<asl_request>(*m))
+      authenticated.push_back(pkt.authenticated);
+  }
+  EXPECT_EQ(authenticated, (std::vector<bool>{false, true}));
+}
+
+TEST_F(asl_hostile_test, apo_numbers_and_request_ids_do_not_follow_one_another) {
+  build_half_raw(1);
+  std::vector<uint32_t> numbers;
+  for (int i = 0; i < 4; ++i)
+    numbers.push_back(
+      add(1, "n" + std::to_string(i), "t", spawn_calculator(std::make_shared<seen>()))
+        .apo);
+  for (size_t i = 1; i < numbers.size(); ++i) {
+    EXPECT_NE(numbers[i], numbers[i - 1] + 1);
+    EXPECT_NE(numbers[i], numbers[i - 1]);
+  }
+  // The permutation behind them gives distinct values (no repeats while
+  // the counter runs) and never 0.
+  scrambled_sequence<uint32_t> seq{12345};
+  std::set<uint32_t> seen_values;
+  for (int i = 0; i < 100000; ++i) {
+    auto x = seq.next();
+    EXPECT_NE(x, 0u);
+    seen_values.insert(x);
+  }
+  EXPECT_EQ(seen_values.size(), 100000u);
+  scrambled_sequence<uint64_t> ids{777};
+  auto a = ids.next(), b = ids.next();
+  EXPECT_NE(b, a + 1);
+  EXPECT_NE(a, b);
+}
+
+TEST_F(asl_hostile_test, discovery_answers_fill_the_remote_table_only_up_to_its_bound) {
+  cfg.max_remote_apos = 8;
+  build_half_raw(1);
+  asl_answer flood;
+  for (uint32_t i = 1; i <= 20; ++i)
+    flood.entries.push_back(asl_entry{i, "x" + std::to_string(i), "t"});
+  inject(id_of(0), flood, false);
+  EXPECT_EQ(stats(1).known_remote_apos, 8u);
+  EXPECT_EQ(stats(1).remote_apos_refused, 12u);
+  // Known entries are refreshed, never refused.
+  flood.entries.resize(8);
+  inject(id_of(0), flood, false);
+  EXPECT_EQ(stats(1).remote_apos_refused, 12u);
+  // A discovery collects at most max_remote_apos matches, whatever answers.
+  auto result = std::make_shared<std::vector<apo_ref>>();
+  auto hdl = asl(1);
+  sys().spawn([=](caf::event_based_actor* self) {
+    self->request(hdl, caf::infinite, atom::find_v,
+                  apo_query{query_by::type, "t", 200, false})
+      .then([=](std::vector<apo_ref>& xs) { *result = xs; });
+  });
+  run();
+  auto queries = raw.received<asl_query>();
+  ASSERT_FALSE(queries.empty());
+  asl_answer answer{queries.back().query_id, {}};
+  for (uint32_t i = 100; i < 120; ++i)
+    answer.entries.push_back(asl_entry{i, "y", "t"});
+  raw.send(answer);
+  advance(300ms);
+  EXPECT_EQ(result->size(), 8u);
+  EXPECT_EQ(stats(1).discovery_entries_refused, 12u);
+}
+
+TEST_F(asl_hostile_test, watches_subscribers_and_publishers_stay_within_their_bounds) {
+  cfg.max_watches = 4;
+  cfg.max_topic_peers = 2;
+  build_half_raw(1);
+  std::vector<apo_ref> refs;
+  for (int i = 0; i < 6; ++i)
+    refs.push_back(add(1, "w" + std::to_string(i), "t",
+                       spawn_calculator(std::make_shared<seen>())));
+  for (auto& r : refs)
+    inject(id_of(0), asl_watch{r.apo}, false);
+  EXPECT_EQ(stats(1).watches, 4u);
+  EXPECT_EQ(stats(1).watches_refused, 2u);
+  // Publisher side: subscribers from five modules, two are kept.
+  caf::anon_send(asl(1), atom::publish_v, std::string{"pose"},
+                 caf::make_message(int32_t{1}));
+  run();
+  for (module_id m = 0x60; m < 0x65; ++m)
+    inject(m, asl_subscribe{"pose", 1000}, false);
+  EXPECT_EQ(stats(1).subscribers_refused, 3u);
+  // Subscriber side: publications from five modules are all delivered, two
+  // are tracked for gaps.
+  auto log = std::make_shared<seen>();
+  auto sub = spawn_recorder(log);
+  ASSERT_TRUE(call<>(asl(1), atom::subscribe_v, std::string{"odom"}, sub));
+  auto one = payload_of(caf::make_message(int32_t{7}));
+  for (module_id m = 0x60; m < 0x65; ++m)
+    inject(m, asl_publish{"odom", 1, one}, false);
+  EXPECT_EQ(log->numbers.size(), 5u);
+  EXPECT_EQ(stats(1).publishers_refused, 3u);
+}
+
+TEST_F(asl_hostile_test, a_module_serves_at_most_max_pending_requests_of_others) {
+  cfg.max_pending = 2;
+  build_half_raw(1);
+  auto ref = add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto never = payload_of(caf::make_message(atom::done_v));
+  for (uint64_t id = 1; id <= 5; ++id)
+    inject(id_of(0), asl_request{id, ref.apo, never}, false);
+  EXPECT_EQ(stats(1).requests_served, 2u);
+  EXPECT_EQ(stats(1).serving_refused, 3u);
+  auto rs = responses();
+  ASSERT_EQ(rs.size(), 3u);
+  for (auto& r : rs)
+    EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::queue_full));
+}
+
+TEST_F(asl_hostile_test, when_the_routing_agent_dies_callers_get_unavailable_not_a_caf_code) {
+  build(2, {{{0, 1}, "ethernet"}});
+  auto ref = add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, ref);
+  ASSERT_TRUE(proxy);
+  auto waiting = start_request<int32_t>(*proxy, atom::done_v);
+  caf::anon_send_exit(net->at(0).agent, caf::exit_reason::kill);
+  run();
+  ASSERT_EQ(waiting->size(), 1u);
+  ASSERT_FALSE(waiting->front());
+  EXPECT_TRUE(is(waiting->front().error(), ec::unavailable))
+    << render(waiting->front().error());
+  auto again = bind(0, ref);
+  ASSERT_FALSE(again);
+  EXPECT_TRUE(is(again.error(), ec::unavailable)) << render(again.error());
+  auto found = call<std::vector<apo_ref>>(
+    asl(0), atom::find_v, apo_query{query_by::name, "calc", 100, false});
+  ASSERT_FALSE(found);
+  EXPECT_TRUE(is(found.error(), ec::unavailable));
+}
+
+TEST(unexpected_messages, are_counted_and_logged_at_a_bounded_rate_without_content) {
+  detail::unexpected_log log;
+  auto t0 = std::chrono::steady_clock::now();
+  int logged = 0;
+  for (int i = 0; i < 1000; ++i)
+    if (!log.admit("line", t0).empty())
+      ++logged;
+  EXPECT_EQ(logged, static_cast<int>(detail::unexpected_log::burst));
+  // A second later one more line, saying how many were not logged.
+  auto next = log.admit("line", t0 + 1s);
+  EXPECT_EQ(next, "line (990 more not logged)");
+  EXPECT_TRUE(log.admit("line", t0 + 1s).empty());
+}
+
+TEST_F(asl_test, an_apo_with_log_unexpected_drops_what_it_does_not_handle_and_counts_it) {
+  build(2, {{{0, 1}, "ethernet"}});
+  std::vector<std::string> lines;
+  set_unexpected_sink([&](const std::string& l) { lines.push_back(l); });
+  auto apo = track(sys().spawn([](caf::event_based_actor* self) -> caf::behavior {
+    self->set_default_handler(log_unexpected);
+    return {[](int32_t x) { return x; }};
+  }));
+  auto ref = add(1, "strict", "t", apo);
+  auto proxy = bind(0, ref);
+  ASSERT_TRUE(proxy);
+  auto before = stats(1).unexpected_messages;
+  auto res = ask<int32_t>(*proxy, 1s, std::string{"secret payload"});
+  ASSERT_FALSE(res);
+  EXPECT_TRUE(is(res.error(), ec::invalid_parameter)) << render(res.error());
+  EXPECT_EQ(stats(1).unexpected_messages, before + 1);
+  set_unexpected_sink(nullptr);
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.back().find("secret payload"), std::string::npos) << lines.back();
+  // Type names only ("@str" is CAF's portable name of std::string).
+  EXPECT_NE(lines.back().find("(@str)"), std::string::npos) << lines.back();
 }

@@ -24,6 +24,7 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <set>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -197,6 +198,11 @@ protected:
     mc.routing.id = id;
     mc.routing.hello_interval = 100ms;
     mc.devices = std::move(devices);
+    // Remote control needs a keyed network (or, without a key, a module
+    // that allows unsigned remote control).
+    if (keyed)
+      mc.routing.auth.key = std::vector<uint8_t>(32, 0x5A);
+    mc.apps.allow_unsigned_remote = allow_unsigned.count(id) != 0;
     auto m = start_module(*sys, mc);
     if (!m) {
       ADD_FAILURE() << render(m.error());
@@ -251,6 +257,11 @@ protected:
     })) << call({{"cmd", "echo"}, {"module", "0x32"}}).dump();
   }
 
+  /// Set in a derived fixture's constructor: whether the three modules
+  /// share a key, and which of them allow unsigned remote control (by
+  /// default no key, and all three allow it: control.allow_unsigned_remote).
+  bool keyed = false;
+  std::set<module_id> allow_unsigned{0x30, 0x31, 0x32};
   temp_dir dir;
   caf::actor_system_config cfg;
   std::optional<caf::actor_system> sys;
@@ -395,7 +406,7 @@ TEST_F(control_test, neighbors_apps_stats_and_echo_have_their_shapes) {
     EXPECT_TRUE(ch["tx_packets"].is_number()) << ch.dump();
   }
   for (auto& [k, v] : stats["routing"].items()) {
-    if (k != "self" && k != "assigned") {
+    if (k != "self" && k != "assigned" && k != "id_conflict") {
       EXPECT_TRUE(v.is_number()) << k;
     }
   }
@@ -442,6 +453,66 @@ TEST_F(control_test, forwards_requests_through_a_router_module) {
   EXPECT_EQ(result({{"cmd", "info"}, {"module", "0x32"}})["name"], "charlie");
   // Forwarded errors come back as they are.
   EXPECT_EQ(error_code({{"cmd", "nope"}, {"module", "0x32"}}), "unknown_command");
+}
+
+/// The same modules without a key: charlie allows unsigned remote control
+/// (control.allow_unsigned_remote), bravo does not.
+class control_keyless_test : public control_test {
+protected:
+  control_keyless_test() {
+    keyed = false;
+    allow_unsigned = {0x32};
+  }
+};
+
+TEST_F(control_keyless_test, a_module_without_a_key_refuses_remote_control_unless_allowed) {
+  converge(); // echo through alpha to charlie works: charlie allows it
+  EXPECT_EQ(result({{"cmd", "info"}, {"module", "0x32"}})["name"], "charlie");
+  // bravo refuses every remote command with a typed error, at once (no
+  // timeout), and counts it; its links stay as they were.
+  auto j = call({{"cmd", "link"}, {"module", "0x31"}, {"device", "eth0"},
+                 {"state", "down"}});
+  ASSERT_FALSE(j.value("ok", true)) << j.dump();
+  EXPECT_EQ(j["error"]["code"], "unauthorized") << j.dump();
+  EXPECT_NE(j["error"]["message"].get<std::string>().find("0x31"),
+            std::string::npos);
+  EXPECT_EQ(error_code({{"cmd", "echo"}, {"module", "0x31"}}), "unauthorized");
+  caf::scoped_actor self{*sys};
+  app_support_stats st;
+  self->request(bravo->apps, 5s, atom::get_v, atom::stats_v)
+    .receive([&](app_support_stats& x) { st = x; },
+             [](caf::error& err) { FAIL() << render(err); });
+  EXPECT_GE(st.rx_unauthorized, 2u);
+  EXPECT_EQ(result({{"cmd", "channels"}, {"module", "0x32"}}).size(), 1u);
+  // Local control of bravo (its own service) still works.
+  self->request(ctl_bravo, 5s, std::string{R"({"cmd":"echo"})"})
+    .receive([](std::string& reply) {
+               EXPECT_NE(reply.find("\"ok\":true"), std::string::npos) << reply;
+             },
+             [](caf::error& err) { FAIL() << render(err); });
+  // hermctl shows the refusal as one line with its code.
+  auto r = hermctl({"-s", socket, "--module", "0x31", "info"});
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("unauthorized"), std::string::npos) << r.output;
+}
+
+/// The same modules with a network key (auth.data: discovery, the
+/// default): remote control travels signed and is served.
+class control_keyed_test : public control_test {
+protected:
+  control_keyed_test() {
+    keyed = true;
+    allow_unsigned.clear();
+  }
+};
+
+TEST_F(control_keyed_test, remote_control_travels_signed_through_a_router) {
+  converge();
+  EXPECT_EQ(result({{"cmd", "info"}, {"module", "0x32"}})["name"], "charlie");
+  EXPECT_EQ(result({{"cmd", "echo"}, {"module", "0x31"}})["name"], "bravo");
+  auto st = result({{"cmd", "stats"}, {"module", "0x32"}});
+  EXPECT_EQ(st["apps"]["rx_unauthorized"], 0) << st.dump();
+  EXPECT_GT(st["routing"]["tx_signed"].get<uint64_t>(), 0u) << st.dump();
 }
 
 TEST_F(control_test, ping_measures_round_trips_to_a_remote_module) {

@@ -27,6 +27,7 @@ TEST(testbed, every_event_of_the_paper_scenario_happens) {
   auto& out = tb.output();
   for (auto name :
        {"routes_converged", "topology_written", "sonar_batch_received",
+        "first_sonar_batch_not_lost",
         "sonar_batch_fragmented_on_rs232c", "vision_routed_through_mobile",
         "vision_frame_received", "routes_withdrawn",
         "vision_fails_without_mobile", "vision_resumes", "traffic_moves_to_can",
