@@ -427,9 +427,13 @@ void deliver(agent_impl self, const data_header& h, const byte_buffer& bytes) {
   uint8_t hops = h.src == st.table.self()
                    ? 0
                    : static_cast<uint8_t>(default_hop_limit - h.hop_limit + 1);
+  // A keyed module keeps the authenticated flag of a data packet whose
+  // trailer it verified (authenticate()); a keyless one never gets here
+  // with it set (on_data).
   packet_delivered msg{h.src, h.protocol, h.priority, hops,
                        byte_buffer(bytes.begin() + header_size(h),
-                                   bytes.end())};
+                                   bytes.end()),
+                       h.authenticated};
   self->send(i->second, std::move(msg));
 }
 
@@ -479,6 +483,10 @@ bool must_sign(agent_impl self, const data_header& h, const byte_buffer& bytes) 
   auto& st = self->state;
   if (!st.auth)
     return false;
+  // A packet that arrived signed leaves signed: what its originator asked
+  // for (send_packet::sign, remote control) holds on every hop.
+  if (h.authenticated)
+    return true;
   auto off = header_size(h);
   return data_needs_auth(st.auth->config(), h.dst, h.protocol, bytes.data() + off,
                          bytes.size() - off);
@@ -558,7 +566,7 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
     ++st.stats.rx_malformed;
     return;
   }
-  if (h->authenticated) {
+  if (h->authenticated && !st.auth) {
     // Signed by a keyed network, and this module has no key (a keyed one
     // has checked and removed the trailer): where the payload ends is
     // unknown, so nothing of it can be delivered.
@@ -905,9 +913,10 @@ bool authenticate(agent_impl self, packet_received& pkt, packet_type type) {
   if (type == packet_type::challenge_request
       || type == packet_type::challenge_reply)
     return false; // answered above; a reply from a known index: nothing to do
+  // Data packets keep their authenticated flag: it tells the receiver that
+  // the packet was verified (packet_delivered::authenticated) and a
+  // forwarder that it must sign it again (must_sign).
   b.resize(t.body_size);
-  if (type == packet_type::data)
-    set_authenticated(b.data(), false);
   return true;
 }
 
@@ -1016,7 +1025,7 @@ caf::error originate(agent_impl self, send_packet& msg) {
     auto t = make_trace(self, packet_trace::originated, h, bytes.size());
     trace_out(self, t, h, *nh);
   }
-  auto sign = must_sign(self, h, bytes);
+  auto sign = msg.sign || must_sign(self, h, bytes);
   transmit(self, *nh, h.priority, std::move(bytes), sign);
   return caf::none;
 }

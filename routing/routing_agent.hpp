@@ -34,12 +34,16 @@ struct send_packet {
   uint8_t protocol = 0;
   uint8_t priority = prio_normal;
   byte_buffer payload;
+  /// In a keyed network: sign the packet whatever `auth.data` says (remote
+  /// control travels so; docs/user-guide.md, "auth"). No effect without a
+  /// key.
+  bool sign = false;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, send_packet& x) {
   return f(caf::meta::type_name("send_packet"), x.dst, x.protocol, x.priority,
-           x.payload);
+           x.payload, x.sign);
 }
 
 /// A data packet for this module, handed to the receiver of its protocol.
@@ -50,12 +54,15 @@ struct packet_delivered {
   /// Hops the packet took.
   uint8_t hops = 0;
   byte_buffer payload;
+  /// The packet arrived signed and its signature verified (a keyed module;
+  /// always false without a key, and for packets this module sent itself).
+  bool authenticated = false;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, packet_delivered& x) {
   return f(caf::meta::type_name("packet_delivered"), x.src, x.protocol,
-           x.priority, x.hops, x.payload);
+           x.priority, x.hops, x.payload, x.authenticated);
 }
 
 /// The selected size-class-0 route to a destination changed: it appeared,
