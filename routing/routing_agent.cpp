@@ -692,6 +692,7 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
         ++st.stats.rx_routes_over_limit;
         break;
       case update_result::over_share:
+        ++st.stats.rx_routes_over_limit;
         ++st.stats.rx_routes_over_share;
         break;
       default:

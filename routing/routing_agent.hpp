@@ -211,9 +211,10 @@ struct routing_stats {
   uint32_t routes = 0;
   uint32_t neighbours = 0;
   /// Refused because a bound was reached (routing_config::limits): new
-  /// destinations or routes past the table's total (rx_routes_over_limit)
-  /// or past one neighbour's share (rx_routes_over_share), one per update
-  /// entry; hellos of new neighbours past the total or a channel's share
+  /// destinations or routes past any of the table's bounds
+  /// (rx_routes_over_limit), of which past one neighbour's share
+  /// (rx_routes_over_share), one per update entry; hellos of new
+  /// neighbours past the total or a channel's share
   /// (rx_neighbours_over_limit); seqno requests not sent because
   /// routing_config::max_seqno_requests were sent within the last hello
   /// interval (seqno_requests_over_limit).

@@ -193,9 +193,31 @@ void trace_packet(const packet_trace& t) {
 
 /// Logs every change of a destination's selected route, from the route
 /// event alone: one line per change, never a table query (a query per
-/// event made a flood of advertisements cost O(N^2)).
+/// event made a flood of advertisements cost O(N^2)). At a bounded rate: a
+/// neighbour that advertises thousands of destinations must not make the
+/// daemon write thousands of lines (nor block on a full log pipe); what the
+/// bound holds back is summed up once a second.
 struct route_logger_state {
   static inline const char* name = "hermd.route_logger";
+  /// Token bucket: `burst` lines at once (a network of a few hundred
+  /// modules starting up is logged in full), then `rate` per second.
+  static constexpr double burst = 200;
+  static constexpr double rate = 20;
+  double tokens = burst;
+  std::chrono::steady_clock::time_point refilled = std::chrono::steady_clock::now();
+  uint64_t held_back = 0;
+  bool summary_due = false;
+
+  bool take() {
+    auto now = std::chrono::steady_clock::now();
+    std::chrono::duration<double> dt = now - refilled;
+    refilled = now;
+    tokens = std::min(burst, tokens + dt.count() * rate);
+    if (tokens < 1)
+      return false;
+    tokens -= 1;
+    return true;
+  }
 };
 
 caf::behavior route_logger(caf::stateful_actor<route_logger_state>* self,
@@ -203,7 +225,16 @@ caf::behavior route_logger(caf::stateful_actor<route_logger_state>* self,
   self->send(agent, atom::subscribe_v, atom::routes_v,
              caf::actor_cast<route_listener_actor>(self));
   return {
-    [](reachability& r) {
+    [self](reachability& r) {
+      auto& st = self->state;
+      if (!st.take()) {
+        ++st.held_back;
+        if (!st.summary_due) {
+          st.summary_due = true;
+          self->delayed_send(self, 1s, atom::tick_v);
+        }
+        return;
+      }
       if (!r.reachable) {
         spdlog::info("route to {} withdrawn: unreachable (was cost {})",
                      to_hex(r.id), r.old_cost);
@@ -217,6 +248,16 @@ caf::behavior route_logger(caf::stateful_actor<route_logger_state>* self,
       spdlog::info("route to {}: cost {}{}, {} hop(s), next hop {} on channel "
                    "{}, path {}",
                    to_hex(r.id), r.cost, was, r.hops, next, r.channel, r.path);
+    },
+    [self](atom::tick) {
+      auto& st = self->state;
+      st.summary_due = false;
+      if (st.held_back == 0)
+        return;
+      spdlog::info("{} more route changes not logged (at most {} lines a "
+                   "second; hermctl routes shows the table)",
+                   st.held_back, route_logger_state::rate);
+      st.held_back = 0;
     },
   };
 }
