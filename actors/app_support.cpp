@@ -1428,10 +1428,12 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
   init.cfg = cfg;
   init.agent = agent;
   std::random_device rd;
-  auto key = [&rd] { return (uint64_t{rd()} << 32) | rd(); };
-  init.table = std::make_unique<app_table>(key());
-  init.query_ids = std::make_unique<scrambled_sequence<uint32_t>>(key());
-  init.request_ids = std::make_unique<scrambled_sequence<uint64_t>>(key());
+  auto random_key = [&rd] { return (uint64_t{rd()} << 32) | rd(); };
+  init.table = std::make_unique<app_table>(random_key());
+  init.query_ids
+    = std::make_unique<scrambled_sequence<uint32_t>>(random_key());
+  init.request_ids
+    = std::make_unique<scrambled_sequence<uint64_t>>(random_key());
   init.sink = detail::make_reply_sink(self->system(),
                                       caf::actor_cast<caf::actor>(self));
   self->send(agent, atom::subscribe_v, asl_protocol,

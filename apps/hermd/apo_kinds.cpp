@@ -11,6 +11,7 @@
 #include "caf/actor_system.hpp"
 #include "caf/actor_system_config.hpp"
 #include "caf/event_based_actor.hpp"
+#include "caf/sec.hpp"
 #include "caf/send.hpp"
 #include "caf/stateful_actor.hpp"
 
@@ -67,6 +68,14 @@ caf::error only_options(const apo_config& cfg, std::vector<std::string> known) {
                           + (list.empty() ? "none" : list) + ")");
     }
   return caf::none;
+}
+
+/// An error for the log, in HERM's terms: an APO's own request that got no
+/// answer in time is a timeout, not CAF's request_timeout.
+std::string describe(const caf::error& err) {
+  if (err == caf::sec::request_timeout)
+    return render(make_error(ec::timeout, "no answer in time"));
+  return render(err);
 }
 
 // -- binding to a remote APO -----------------------------------------------------
@@ -293,7 +302,7 @@ void request_batch(sonar_actor* self, sonar_batch b) {
       },
       [self, n](caf::error& err) {
         spdlog::warn("{}: sonar batch {} failed: {}", self->state.apo_name, n,
-                     render(err));
+                     describe(err));
       });
 }
 
@@ -396,7 +405,7 @@ void request_frame(vision_actor* self, vision_frame f) {
       },
       [self, seq](caf::error& err) {
         spdlog::warn("{}: vision frame {} failed: {}", self->state.apo_name,
-                     seq, render(err));
+                     seq, describe(err));
       });
 }
 
