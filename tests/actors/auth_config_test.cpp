@@ -1,6 +1,7 @@
 // The `auth` section of a module's configuration file: the key comes from a
 // file with strict permissions (never from the file's text or the command
-// line), errors name the file, line and field, and never show the key.
+// line), errors name the file, line and field, and never show the key; and
+// control.allow_unsigned_remote, which only a module without a key may set.
 
 #include <gtest/gtest.h>
 
@@ -131,4 +132,34 @@ TEST_F(auth_config_file, mistakes_name_the_file_line_and_field) {
     EXPECT_EQ(err.substr(0, r.expected.size()), r.expected) << err;
     EXPECT_EQ(err.find(secret), std::string::npos) << "the key leaked: " << err;
   }
+}
+
+// -- remote control without a key ----------------------------------------------------
+
+TEST_F(auth_config_file, unsigned_remote_control_is_off_unless_a_keyless_config_allows_it) {
+  auto plain = parse_config(doc(""), "robot.yaml");
+  ASSERT_TRUE(plain) << render(plain.error());
+  EXPECT_FALSE(plain->module.apps.allow_unsigned_remote);
+  auto allowed = parse_config(
+    doc("control:\n  allow_unsigned_remote: true\n"), "robot.yaml");
+  ASSERT_TRUE(allowed) << render(allowed.error());
+  EXPECT_TRUE(allowed->module.apps.allow_unsigned_remote);
+  EXPECT_EQ(error_of(doc("control:\n  allow_unsigned_remote: maybe\n")),
+            "robot.yaml:5: control.allow_unsigned_remote: expected true or "
+            "false, got 'maybe'");
+  // A keyed module takes remote control only signed, in either order of
+  // the sections.
+  auto msg = "robot.yaml:5: control.allow_unsigned_remote: expected false "
+             "with auth (a keyed module takes remote control only signed), "
+             "got 'true'";
+  EXPECT_EQ(error_of(doc("control:\n  allow_unsigned_remote: true\nauth:\n"
+                         "  key_file: " + key + "\n")),
+            msg);
+  EXPECT_EQ(error_of(doc("auth:\n  key_file: " + key
+                         + "\ncontrol:\n  allow_unsigned_remote: true\n")),
+            std::string{msg}.replace(std::string{msg}.find(":5:"), 3, ":7:"));
+  auto off = parse_config(doc("control:\n  allow_unsigned_remote: false\nauth:\n"
+                              "  key_file: " + key + "\n"),
+                          "robot.yaml");
+  EXPECT_TRUE(off) << render(off.error());
 }
