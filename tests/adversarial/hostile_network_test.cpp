@@ -139,6 +139,23 @@ protected:
     fs::remove_all(dir_, ec);
   }
 
+  /// hermd with its log in a file: a pipe nobody reads while an attack
+  /// runs would fill and block the daemon in write(), which is not what is
+  /// under test. (exec keeps the pid hermd's.)
+  std::vector<std::string> daemon(const std::string& name,
+                                   const std::string& config_file) const {
+    return {"/bin/sh", "-c",
+            "exec " + hermd + " " + config_file + " >" + dir_ + "/" + name
+              + ".log 2>&1"};
+  }
+
+  /// What module `name` logged so far (its last 8 KiB).
+  std::string log(const std::string& name) const {
+    std::ifstream in{dir_ + "/" + name + ".log"};
+    std::string text{std::istreambuf_iterator<char>{in}, {}};
+    return text.size() > 8192 ? text.substr(text.size() - 8192) : text;
+  }
+
   std::string sock(const std::string& name) const {
     return dir_ + "/" + name + ".sock";
   }
@@ -152,7 +169,9 @@ protected:
                         // b's control service answers a's pings (the
                         // legitimate traffic); a, the victim, keeps the
                         // default: no remote control without a key.
-                        << (name == "b" ? "  allow_unsigned_remote: true\n" : "")
+                        << (name == "b" && extra.find("auth:") == std::string::npos
+                              ? "  allow_unsigned_remote: true\n"
+                              : "")
                         << extra
                         << "channels:\n  - name: eth0\n    kind: udp\n"
                            "    interface: 127.0.0.1:"
@@ -163,17 +182,15 @@ protected:
   /// Starts a and b (each with `extra` YAML before its channels) and waits,
   /// bounded, until a reaches b.
   void start(const std::string& extra_a = "", const std::string& extra_b = "") {
-    a_.emplace(std::vector<std::string>{
-      hermd, config("a", "0x21", pa_, pb_, extra_a)});
-    b_.emplace(std::vector<std::string>{
-      hermd, config("b", "0x22", pb_, pa_, extra_b)});
+    a_.emplace(daemon("a", config("a", "0x21", pa_, pb_, extra_a)));
+    b_.emplace(daemon("b", config("b", "0x22", pb_, pa_, extra_b)));
     for (int i = 0; i < 150; ++i) {
       auto st = stats();
       if (!st.is_null() && st.value("reachable", 0u) >= 1u)
         return;
       std::this_thread::sleep_for(100ms);
     }
-    FAIL() << "a never reached b:\n" << a_->output();
+    FAIL() << "a never reached b:\n" << log("a") << "\nb:\n" << log("b");
   }
 
   /// `hermctl -s a.sock ARGS --json`, parsed; null when it failed.
@@ -233,11 +250,10 @@ protected:
   /// What every test asserts after its attack. The peak is read again
   /// after a answered: what the attack queued is processed by then.
   void expect_survived(uint64_t peak_kib) {
-    ASSERT_TRUE(a_->running()) << "a died under attack:\n" << a_->output();
+    ASSERT_TRUE(a_->running()) << "a died under attack:\n" << log("a");
     EXPECT_FALSE(stats().is_null()) << "a stopped answering hermctl";
-    EXPECT_TRUE(a_reaches_b()) << "legitimate traffic stopped:\n"
-                               << a_->output();
-    ASSERT_TRUE(a_->running()) << "a died under attack:\n" << a_->output();
+    EXPECT_TRUE(a_reaches_b()) << "legitimate traffic stopped:\n" << log("a");
+    ASSERT_TRUE(a_->running()) << "a died under attack:\n" << log("a");
     peak_kib = std::max(peak_kib, memory_of(a_->pid()).peak_kib);
     RecordProperty("peak_kib", std::to_string(peak_kib));
     std::cout << "[ adversarial ] a's peak resident memory: " << peak_kib
@@ -299,6 +315,9 @@ TEST_F(hostile_network, a_fake_neighbour_advertising_50000_destinations_is_bound
   auto st = stats();
   ASSERT_FALSE(st.is_null());
   EXPECT_GT(st.value("rx_routes_over_limit", uint64_t{0}), 0u) << st.dump();
+  // One neighbour fills its share first, leaving room for the others.
+  EXPECT_GT(st.value("rx_routes_over_share", uint64_t{0}), 0u) << st.dump();
+  EXPECT_LE(st.value("destinations", uint64_t{0}), 4096u) << st.dump();
   EXPECT_LE(st.value("reachable", uint64_t{0}), 4096u) << st.dump();
 }
 
@@ -420,6 +439,10 @@ TEST_F(hostile_network, hello_storms_from_many_ports_and_instances_are_bounded) 
     }
   });
   expect_survived(peak);
+  auto st = stats();
+  ASSERT_FALSE(st.is_null());
+  // 300 new neighbours on one channel: past the per-channel share.
+  EXPECT_GT(st.value("rx_neighbours_over_limit", uint64_t{0}), 0u) << st.dump();
 }
 
 // Flooded control packets: claims, conflicts and seqno requests with fresh
@@ -451,7 +474,9 @@ TEST_F(hostile_network, floods_of_claims_conflicts_and_seqno_requests_are_bounde
           break;
       }
       x.send(pa_, single_frame(packet));
-      if (i % 200 == 199) {
+      // In bursts of 1,500: more distinct floods within the suppression
+      // window (half a hello interval) than the flood memory holds.
+      if (i % 1500 == 1499) {
         x.send(pa_, hello_frame(0x66, 0x5EED, 1, 200));
         x.drain();
         std::this_thread::sleep_for(5ms);
@@ -459,6 +484,19 @@ TEST_F(hostile_network, floods_of_claims_conflicts_and_seqno_requests_are_bounde
     }
   });
   expect_survived(peak);
+  // The flood memory's own bound (4,096 within half a hello interval) is
+  // driven past deterministically in routing_bounds_test; here, where the
+  // kernel's receive buffer limits what arrives, every datagram is
+  // accounted for: received by the channel or counted as a kernel drop
+  // (reported with the next datagram: the hellos after each burst).
+  std::this_thread::sleep_for(50ms);
+  x.send(pa_, hello_frame(0x66, 0x5EED, 1, 200));
+  std::this_thread::sleep_for(100ms);
+  auto all = all_stats();
+  ASSERT_FALSE(all.is_null());
+  EXPECT_GE(sum_of(all, "rx_frames") + sum_of(all, "rx_kernel_dropped"),
+            6000u + 5u)
+    << all.dump();
 }
 
 // Application messages from forged module ids: flooded discovery queries
