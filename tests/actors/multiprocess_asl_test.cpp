@@ -27,6 +27,7 @@ namespace {
 
 const std::string apo_peer = HERM_APO_PEER_BIN;
 const std::string calculator = HERM_CALCULATOR_BIN;
+const std::string hermd = HERMD_BIN;
 
 /// A UDP port on loopback of its own per test process: 10 per process id,
 /// handed out in order.
@@ -107,6 +108,41 @@ TEST(multiprocess_asl, requests_cross_a_router_module_and_an_8_byte_mtu_link) {
   EXPECT_EQ(lines_with(s.output(), "served 20").size(), 1u) << s.output();
   r.terminate();
   EXPECT_EQ(r.wait(10s), 0) << r.output();
+}
+
+// hermd's built-in `echo` APO answers whatever it is asked: here the text
+// requests of herm-apo-peer (it used to answer a string with CAF's
+// unexpected_message). herm-apo-peer expects its own `serve` APO, which
+// answers "echo:" + text, so it counts the unchanged text as a bad reply of
+// the request's size: exactly what an echo gives back.
+TEST(multiprocess_asl, hermds_echo_apo_answers_a_string_request) {
+  temp_dir dir;
+  ASSERT_FALSE(dir.path().empty());
+  auto ph = next_port();
+  auto pa = next_port();
+  auto cfg = dir.path() + "/echo.yaml";
+  std::ofstream{cfg} << "module:\n  name: e\n  id: 0x36\n"
+                        "  hello_interval_ms: 100\ncontrol:\n  socket: "
+                     << dir.path() << "/e.sock\n"
+                     << "channels:\n  - name: eth0\n    kind: udp\n"
+                        "    interface: " << addr(ph) << "\n    peers: ["
+                     << addr(pa) << "]\napos:\n  - name: echo\n"
+                        "    kind: echo\n";
+  child_process e{{hermd, cfg}};
+  child_process a{{apo_peer, "--id", "0x37", "--udp", addr(pa) + "=" + addr(ph),
+                   "--timeout", "30", "call", "--name", "echo", "--count", "5",
+                   "--size", "40"}};
+  a.wait(60s);
+  for (int i = 0; i < 5; ++i)
+    EXPECT_EQ(lines_with(a.output(), "reply " + std::to_string(i)
+                                       + " bad size=40")
+                .size(),
+              1u)
+      << a.output();
+  EXPECT_EQ(lines_with(a.output(), "bad replies 5").size(), 1u) << a.output();
+  EXPECT_EQ(e.output().find("unexpected"), std::string::npos) << e.output();
+  e.terminate();
+  EXPECT_EQ(e.wait(10s), 0) << e.output();
 }
 
 // A (0x34) --udp-- S (0x35). Once A's requests are answered it watches its
