@@ -536,6 +536,8 @@ bool fresh_broadcast(agent_impl self, module_id src, uint32_t id) {
   while (!st.flood_order.empty()
          && (now - st.flood_order.front().first >= st.cfg.flood_memory
              || st.flood_order.size() >= st.cfg.max_flood_ids)) {
+    if (now - st.flood_order.front().first < st.cfg.flood_memory)
+      ++st.stats.flood_ids_evicted;
     st.flood_ids.erase(st.flood_order.front().second);
     st.flood_order.pop_front();
   }
@@ -544,8 +546,6 @@ bool fresh_broadcast(agent_impl self, module_id src, uint32_t id) {
     return false;
   st.flood_order.emplace_back(now, key);
   return true;
-    if (now - st.flood_order.front().first < st.cfg.flood_memory)
-      ++st.stats.flood_ids_evicted;
 }
 
 /// Sends a flooded broadcast on every channel but `except` (signed per
@@ -604,14 +604,6 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
   }
 }
 
-void on_hello(agent_impl self, channel_id ch, link_addr src,
-              const byte_buffer& bytes) {
-  auto& st = self->state;
-  auto h = decode_hello(bytes.data(), bytes.size());
-  if (!h) {
-    ++st.stats.rx_malformed;
-    return;
-  }
 /// True if one more neighbour on channel `ch` stays within the bounds
 /// (routing_config::max_neighbours, max_neighbours_per_channel). O(log n +
 /// the channel's neighbours).
@@ -627,6 +619,14 @@ bool room_for_neighbour(agent_impl self, channel_id ch) {
   return true;
 }
 
+void on_hello(agent_impl self, channel_id ch, link_addr src,
+              const byte_buffer& bytes) {
+  auto& st = self->state;
+  auto h = decode_hello(bytes.data(), bytes.size());
+  if (!h) {
+    ++st.stats.rx_malformed;
+    return;
+  }
   auto ci = st.channels.find(ch);
   if (ci == st.channels.end())
     return;
@@ -642,6 +642,10 @@ bool room_for_neighbour(agent_impl self, channel_id ch) {
     }
     return;
   }
+  if (st.neighbours.count(nh) == 0 && !room_for_neighbour(self, ch)) {
+    ++st.stats.rx_neighbours_over_limit;
+    return;
+  }
   auto [i, added] = st.neighbours.try_emplace(nh);
   auto& n = i->second;
   bool restarted = !added && n.instance != h->instance;
@@ -650,10 +654,6 @@ bool room_for_neighbour(agent_impl self, channel_id ch) {
   n.last_hello = now;
   n.interval = std::chrono::milliseconds(h->interval_ms);
   if (added || restarted) {
-  if (st.neighbours.count(nh) == 0 && !room_for_neighbour(self, ch)) {
-    ++st.stats.rx_neighbours_over_limit;
-    return;
-  }
     apply_change(self, st.table.set_neighbour(nh, ci->second.cost, ci->second.code));
     // Tell the new neighbour everything we know at once.
     send_update(self, st.table.destinations(), ch);
@@ -946,6 +946,10 @@ void tick(agent_impl self) {
       ++i;
     }
   }
+  // Seqno requests older than an interval no longer hold back new ones.
+  for (auto i = st.requested.begin(); i != st.requested.end();)
+    i = now - i->second >= st.cfg.hello_interval ? st.requested.erase(i)
+                                                 : std::next(i);
   auto expired = st.table.expire(now);
   change.changed.insert(change.changed.end(), expired.changed.begin(),
                         expired.changed.end());
@@ -955,10 +959,6 @@ void tick(agent_impl self) {
   change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
                        change.changed.end());
   apply_change(self, change);
-  // Seqno requests older than an interval no longer hold back new ones.
-  for (auto i = st.requested.begin(); i != st.requested.end();)
-    i = now - i->second >= st.cfg.hello_interval ? st.requested.erase(i)
-                                                 : std::next(i);
   if (auto due = st.alloc->next_deadline(); due && *due <= now)
     act(self, st.alloc->tick(now));
   self->delayed_send(self, st.cfg.hello_interval / 4, atom::tick_v);
@@ -1037,6 +1037,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
   auto& init = self->state;
   init.cfg = std::move(cfg);
   init.io = io;
+  init.table = route_table{no_module, init.cfg.limits};
   uint64_t instance = init.cfg.instance;
   uint64_t seed = init.cfg.seed;
   if (instance == 0 || seed == 0) {
@@ -1046,7 +1047,6 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
     if (seed == 0)
       seed = (uint64_t{rd()} << 32) | rd();
   }
-  init.table = route_table{no_module, init.cfg.limits};
   address_allocator::config acfg;
   acfg.static_id = init.cfg.id;
   acfg.claim_interval = init.cfg.hello_interval;
@@ -1094,6 +1094,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       if (st.route_listeners.empty()) {
         // Nobody listened: what was told is stale; tell the whole table.
         st.told.clear();
+        st.pending_told.clear();
         st.route_listeners.push_back(l);
         tell_route_changes(self, st.table.destinations());
       } else {
@@ -1103,7 +1104,6 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       }
       self->monitor(l);
     },
-        st.pending_told.clear();
     [self](atom::get, atom::routes) -> std::vector<route_info> {
       auto& st = self->state;
       std::vector<route_info> result;

@@ -77,14 +77,6 @@ struct reachability {
   /// Of the selected route when reachable.
   uint8_t hops = 0;
   uint32_t cost = 0;
-};
-
-template <class Inspector>
-typename Inspector::result_type inspect(Inspector& f, reachability& x) {
-  return f(caf::meta::type_name("reachability"), x.id, x.reachable, x.hops,
-           x.cost, x.was_reachable, x.old_cost, x.next, x.channel, x.neighbour,
-           x.path);
-}
   /// What the previous event for `id` said (false and 0 for the first).
   bool was_reachable = false;
   uint32_t old_cost = 0;
@@ -96,6 +88,14 @@ typename Inspector::result_type inspect(Inspector& f, reachability& x) {
   channel_id channel = 0;
   link_addr neighbour = 0;
   std::string path;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, reachability& x) {
+  return f(caf::meta::type_name("reachability"), x.id, x.reachable, x.hops,
+           x.cost, x.was_reachable, x.old_cost, x.next, x.channel, x.neighbour,
+           x.path);
+}
 
 inline bool operator==(const reachability& a, const reachability& b) {
   return a.id == b.id && a.reachable == b.reachable && a.hops == b.hops
@@ -198,13 +198,6 @@ struct routing_stats {
   uint64_t rx_challenge_failed = 0;
   uint64_t tx_challenges = 0;
   uint64_t tx_challenge_replies = 0;
-  /// Static ids: disputes over this module's id (another instance heard
-  /// holding it; one per other holder, again when it comes back after
-  /// falling silent), and the other holder while it was heard within the
-  /// last few hello intervals (0 and "" otherwise): its instance and where
-  /// it was heard ("channel 1 (eth0) from 127.0.0.1:9000, hello").
-  uint64_t id_conflicts = 0;
-  uint64_t id_conflict_instance = 0;
   /// What the route table and the neighbour table hold now (gauges), each
   /// bounded by routing_config::limits.
   uint32_t destinations = 0;
@@ -230,6 +223,13 @@ struct routing_stats {
   uint64_t floods_evicted = 0;
   uint64_t flood_ids_evicted = 0;
   uint64_t sources_evicted = 0;
+  /// Static ids: disputes over this module's id (another instance heard
+  /// holding it; one per other holder, again when it comes back after
+  /// falling silent), and the other holder while it was heard within the
+  /// last few hello intervals (0 and "" otherwise): its instance and where
+  /// it was heard ("channel 1 (eth0) from 127.0.0.1:9000, hello").
+  uint64_t id_conflicts = 0;
+  uint64_t id_conflict_instance = 0;
   std::string id_conflict_heard;
 };
 
@@ -351,13 +351,6 @@ struct routing_config {
   /// duplicates, and how many ids at most (the oldest are forgotten first).
   std::chrono::milliseconds flood_memory{30000};
   size_t max_flood_ids = 8192;
-  /// Instance nonce and seed for the address allocator; 0: random.
-  uint64_t instance = 0;
-  uint64_t seed = 0;
-  /// Pre-shared key authentication (routing/auth.hpp); no key: none. With a
-  /// key every control packet sent carries a trailer and every one received
-  /// must carry a valid one; data packets as `auth.data` says. A neighbour's
-  /// packets count only once it has answered a challenge (`auth.challenge`,
   /// Flooded control packets (claims, conflicts, seqno requests) remembered
   /// for half a hello interval to suppress their duplicates, at most.
   size_t max_floods = 4096;
@@ -374,6 +367,13 @@ struct routing_config {
   /// destination it advertised starve at once (RFC 8966 3.8.2.1): the
   /// excess waits for a later interval (counted).
   size_t max_seqno_requests = 64;
+  /// Instance nonce and seed for the address allocator; 0: random.
+  uint64_t instance = 0;
+  uint64_t seed = 0;
+  /// Pre-shared key authentication (routing/auth.hpp); no key: none. With a
+  /// key every control packet sent carries a trailer and every one received
+  /// must carry a valid one; data packets as `auth.data` says. A neighbour's
+  /// packets count only once it has answered a challenge (`auth.challenge`,
   /// on by default): the agent challenges unknown sender indexes on the
   /// link they came from, answers challenges (followed by its hello, so
   /// that the challenger has a neighbour one round trip after it asked).
