@@ -37,6 +37,7 @@
 #include <thread>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/pattern_formatter.h>
 #include <spdlog/spdlog.h>
@@ -494,9 +495,12 @@ public:
       {"apps", caf::actor_cast<caf::actor>(m_.apps)},
       {"control", caf::actor_cast<caf::actor>(control_)},
     };
+    auto j = nlohmann::json::parse(req, nullptr, false);
+    std::string which;
+    if (j.is_object() && j.contains("actor") && j["actor"].is_string())
+      which = j["actor"].get<std::string>();
     for (auto& [name, a] : actors)
-      if (req.find(std::string{"\""} + name + "\"") != std::string::npos
-          && req.find("\"actor\"") != std::string::npos) {
+      if (which == name) {
         spdlog::warn("fault injection: killing core actor '{}'", name);
         caf::anon_send_exit(a, caf::exit_reason::kill);
         return R"({"ok":true,"result":{"killed":")" + std::string{name}
