@@ -414,6 +414,10 @@ int cmd_stats(client& c, const options& o, herm::module_id m) {
   };
   section("routing", r.value("routing", json::object()));
   section("apps", r.value("apps", json::object()));
+  // Only the local socket has one: a module reached with --module answers
+  // without it.
+  if (r.contains("control_socket"))
+    section("control socket", r["control_socket"]);
   for (auto& ch : r.value("channels", json::array()))
     section("channel " + text(ch, "id") + " (" + text(ch, "device") + ", "
               + text(ch, "state") + ")",
