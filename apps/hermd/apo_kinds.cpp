@@ -101,6 +101,16 @@ struct binding {
     held.push_back(std::move(x));
     return true;
   }
+
+  /// Once bound: hands what was held to `send`, oldest first.
+  template <class F>
+  void release(F send) {
+    while (proxy && !held.empty()) {
+      auto x = std::move(held.front());
+      held.pop_front();
+      send(std::move(x));
+    }
+  }
 };
 
 /// Binds `b` to the APO named `target` unless bound or binding already;
@@ -249,20 +259,12 @@ void open_sensor_line(sonar_actor* self) {
 
 void request_batch(sonar_actor* self, sonar_batch b);
 
-/// Sends what was held while the binding was being made.
-void flush_batches(sonar_actor* self) {
-  auto& st = self->state;
-  while (st.target.proxy && !st.target.held.empty()) {
-    auto b = std::move(st.target.held.front());
-    st.target.held.pop_front();
-    request_batch(self, std::move(b));
-  }
-}
-
 void bind_target(sonar_actor* self) {
   auto& st = self->state;
-  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target,
-               [self] { flush_batches(self); });
+  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target, [self] {
+    self->state.target.release(
+      [self](sonar_batch b) { request_batch(self, std::move(b)); });
+  });
 }
 
 void send_batch(sonar_actor* self) {
@@ -411,12 +413,8 @@ void request_frame(vision_actor* self, vision_frame f) {
 
 /// Sends what was held while the binding was being made.
 void flush_frames(vision_actor* self) {
-  auto& st = self->state;
-  while (st.target.proxy && !st.target.held.empty()) {
-    auto f = std::move(st.target.held.front());
-    st.target.held.pop_front();
-    request_frame(self, std::move(f));
-  }
+  self->state.target.release(
+    [self](vision_frame f) { request_frame(self, std::move(f)); });
 }
 
 caf::behavior vision_source(vision_actor* self, apo_context ctx,

@@ -803,27 +803,16 @@ private:
   }
 
   /// Reports what the kernel dropped since the last frame that told us.
-  void note_drops(msghdr& msg) {
-    for (auto* c = CMSG_FIRSTHDR(&msg); c != nullptr;
-         c = CMSG_NXTHDR(&msg, c)) {
-      if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SO_RXQ_OVFL
-          || c->cmsg_len < CMSG_LEN(sizeof(uint32_t)))
-        continue;
-      uint32_t total;
-      std::memcpy(&total, CMSG_DATA(c), sizeof(total));
-      auto delta = static_cast<uint32_t>(total - drops_seen_);
-      drops_seen_ = total;
-      if (delta > 0) {
-        kernel_dropped_ += delta;
-        handler_->on_kernel_drops(delta);
-      }
+  void note_drops(const msghdr& msg) {
+    if (auto delta = rxq_.drops_since(msg); delta > 0) {
+      kernel_dropped_ += delta;
+      handler_->on_kernel_drops(delta);
     }
   }
 
   unsigned ifindex_ = 0;
   int if_mtu_ = 0;
-  /// The kernel's drop count as last reported (receive thread only).
-  uint32_t drops_seen_ = 0;
+  posix::rxq_overflow rxq_;
   std::atomic<uint64_t> kernel_dropped_{0};
 
   /// Guards closing fd_ against concurrent send() calls.

@@ -2,10 +2,12 @@
 
 // Small POSIX helpers shared by the descriptor-based link kinds.
 
+#include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
 
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <system_error>
 #include <utility>
@@ -57,6 +59,34 @@ public:
 
 private:
   int fd_ = -1;
+};
+
+/// The kernel's receive-buffer drop count of a socket with SO_RXQ_OVFL
+/// enabled. The kernel attaches its cumulative count (modulo 2^32) to a
+/// datagram or frame received once drops have happened; `drops_since`
+/// turns that into the number dropped since the count last seen. One per
+/// socket, used by its receiving thread only.
+class rxq_overflow {
+public:
+  /// Frames dropped since the last call that saw a count; 0 when `msg`
+  /// carries none.
+  uint32_t drops_since(const msghdr& msg) {
+    uint32_t delta = 0;
+    for (auto* c = CMSG_FIRSTHDR(&msg); c != nullptr;
+         c = CMSG_NXTHDR(const_cast<msghdr*>(&msg), c)) {
+      if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SO_RXQ_OVFL
+          || c->cmsg_len < CMSG_LEN(sizeof(uint32_t)))
+        continue;
+      uint32_t total;
+      std::memcpy(&total, CMSG_DATA(c), sizeof(total));
+      delta += static_cast<uint32_t>(total - seen_);
+      seen_ = total;
+    }
+    return delta;
+  }
+
+private:
+  uint32_t seen_ = 0;
 };
 
 } // namespace herm::posix

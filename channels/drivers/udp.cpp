@@ -384,19 +384,9 @@ private:
   /// SO_RXQ_OVFL attaches the socket's drop count (cumulative, modulo
   /// 2^32) to a datagram once drops have happened.
   void note_drops(const msghdr& hdr) {
-    for (auto* c = CMSG_FIRSTHDR(&hdr); c != nullptr;
-         c = CMSG_NXTHDR(const_cast<msghdr*>(&hdr), c)) {
-      if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SO_RXQ_OVFL
-          || c->cmsg_len < CMSG_LEN(sizeof(uint32_t)))
-        continue;
-      uint32_t total;
-      std::memcpy(&total, CMSG_DATA(c), sizeof(total));
-      auto delta = static_cast<uint32_t>(total - drops_seen_);
-      drops_seen_ = total;
-      if (delta > 0) {
-        kernel_dropped_ += delta;
-        handler_->on_kernel_drops(delta);
-      }
+    if (auto delta = rxq_.drops_since(hdr); delta > 0) {
+      kernel_dropped_ += delta;
+      handler_->on_kernel_drops(delta);
     }
   }
 
@@ -425,8 +415,7 @@ private:
   std::vector<iovec> iovs_;
   std::vector<sockaddr_in> names_;
   std::vector<uint64_t> controls_;
-  /// The kernel's drop count as last reported (SO_RXQ_OVFL).
-  uint32_t drops_seen_ = 0;
+  posix::rxq_overflow rxq_;
   std::atomic<uint64_t> kernel_dropped_{0};
 };
 
