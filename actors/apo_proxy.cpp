@@ -41,7 +41,7 @@ public:
     }
     auto asl = asl_.lock();
     if (!asl) {
-      bounce(what, make_error(ec::no_route, "the application support layer "
+      bounce(what, make_error(routing_ec::no_route, "the application support layer "
                                             "of this module has stopped"));
       return;
     }

@@ -127,7 +127,7 @@ struct asl_state {
 
   ~asl_state() {
     // Proxies end with the layer; requests still waiting fail.
-    auto reason = make_error(ec::no_route, "the application support layer of "
+    auto reason = make_error(routing_ec::no_route, "the application support layer of "
                                            "this module stopped");
     for (auto& kv : bindings)
       if (auto p = kv.second.proxy.lock())
@@ -158,7 +158,7 @@ struct asl_state {
   std::map<uint32_t, discovery> discoveries;
   std::unique_ptr<scrambled_sequence<uint32_t>> query_ids;
   /// Why the routing agent stopped (then nothing can be sent: requests
-  /// fail at once with ec::unavailable).
+  /// fail at once with app_ec::unavailable).
   caf::error agent_down;
   std::map<std::string, topic_state> topics;
   /// Modules with a route now, and since when others lost theirs.
@@ -237,12 +237,12 @@ void transmit_signed(asl_impl self, module_id dst, const asl_message& msg,
              send_packet{dst, asl_protocol, prio_normal, st.buf, sign});
 }
 
-/// ec::unavailable once the routing agent stopped, else none.
+/// app_ec::unavailable once the routing agent stopped, else none.
 caf::error agent_gone(asl_impl self) {
   auto& st = self->state;
   if (!st.agent_down)
     return caf::none;
-  return make_error(ec::unavailable,
+  return make_error(app_ec::unavailable,
                     "the routing agent of module " + to_hex(st.self_id)
                       + " stopped (" + render(st.agent_down) + ")");
 }
@@ -621,7 +621,7 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   auto& st = self->state;
   auto i = st.bindings.find(id);
   if (i == st.bindings.end()) {
-    refuse(self, sender, mid, make_error(ec::apo_gone, "binding ended"));
+    refuse(self, sender, mid, make_error(app_ec::apo_gone, "binding ended"));
     return;
   }
   if (auto err = agent_gone(self)) {
@@ -636,7 +636,7 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   }
   if (!b.bound) {
     refuse(self, sender, mid,
-           make_error(ec::apo_gone, "no APO named '" + b.pattern
+           make_error(app_ec::apo_gone, "no APO named '" + b.pattern
                                       + "' is bound yet (looking for one)"));
     return;
   }
@@ -644,7 +644,7 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
     // A rebinding proxy whose match is here: hand it over unchanged.
     auto a = st.apos.find(b.target.apo);
     if (a == st.apos.end()) {
-      refuse(self, sender, mid, make_error(ec::apo_gone, describe(b.target)));
+      refuse(self, sender, mid, make_error(app_ec::apo_gone, describe(b.target)));
       return;
     }
     post(self, caf::actor_cast<caf::strong_actor_ptr>(a->second),
@@ -654,7 +654,7 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   if (!reachable(self, b.target.module)) {
     ++st.stats.dropped_no_route;
     refuse(self, sender, mid,
-           make_error(ec::no_route, "no route to module "
+           make_error(routing_ec::no_route, "no route to module "
                                       + to_hex(b.target.module)));
     return;
   }
@@ -704,7 +704,7 @@ void respond_error(asl_impl self, module_id dst, uint64_t rid,
 
 /// Whether a request for local APO `apo` that arrived from `src` (signed
 /// and verified: `authenticated`) may reach it; if not, it is counted and
-/// the requester gets ec::unauthorized.
+/// the requester gets app_ec::unauthorized.
 bool authorized(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
                 bool authenticated) {
   auto& st = self->state;
@@ -714,7 +714,7 @@ bool authorized(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
   ++st.stats.rx_unauthorized;
   auto entry = st.table->local(apo);
   respond_error(self, src, rid,
-                make_error(ec::unauthorized,
+                make_error(app_ec::unauthorized,
                            "APO '" + (entry ? entry->name : std::string{"?"})
                              + "' of module " + to_hex(st.self_id)
                              + " takes requests from other modules only signed "
@@ -757,7 +757,7 @@ open_request(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
   if (a == st.apos.end()) {
     ++st.stats.rx_unknown_apo;
     respond_error(self, src, rid,
-                  make_error(ec::apo_gone, "no APO " + std::to_string(apo)
+                  make_error(app_ec::apo_gone, "no APO " + std::to_string(apo)
                                              + " on module "
                                              + to_hex(st.self_id)));
     return std::nullopt;
@@ -766,12 +766,12 @@ open_request(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
   auto msg = unmarshal(self->system(), payload.data(), payload.size(),
                        st.cfg.limits);
   if (!msg) {
-    if (is(msg.error(), ec::unknown_type))
+    if (is(msg.error(), app_ec::unknown_type))
       ++st.stats.rx_unknown_type;
     else
       ++st.stats.rx_malformed;
     respond_error(self, src, rid,
-                  make_error(static_cast<ec>(msg.error().code()),
+                  make_herm_error(msg.error().code(),
                              "module " + to_hex(st.self_id) + ": "
                                + context_of(msg.error())),
                   sign);
@@ -871,7 +871,7 @@ void on_reply(asl_impl self, uint64_t local, caf::message& msg) {
     // CAF's own codes never reach a user: the APO exited before it could
     // answer, or did not understand the request.
     if (err == caf::sec::request_receiver_down)
-      err = make_error(ec::apo_gone, "the APO exited before it answered");
+      err = make_error(app_ec::apo_gone, "the APO exited before it answered");
     else if (err == caf::sec::unexpected_message)
       err = make_error(ec::invalid_parameter,
                        "the APO does not handle a message of this type");
@@ -915,7 +915,7 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
       // for the next target instead of failing.
       auto err = from_wire(r.error);
       auto b = st.bindings.find(out.binding);
-      if (is(err, ec::apo_gone) && b != st.bindings.end() && b->second.rebind) {
+      if (is(err, app_ec::apo_gone) && b != st.bindings.end() && b->second.rebind) {
         out.sends = 0;
         lose_target(self, out.binding, err, err);
         return;
@@ -937,14 +937,14 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
   if (!r.ok) {
     auto err = from_wire(r.error);
     post(self, out.sender, from, out.mid.response_id(), caf::make_message(err));
-    if (is(err, ec::apo_gone))
+    if (is(err, app_ec::apo_gone))
       lose_target(self, out.binding, err, err);
     return;
   }
   auto msg = unmarshal(self->system(), r.payload.data(), r.payload.size(),
                        st.cfg.limits);
   if (!msg) {
-    if (is(msg.error(), ec::unknown_type))
+    if (is(msg.error(), app_ec::unknown_type))
       ++st.stats.rx_unknown_type;
     else
       ++st.stats.rx_malformed;
@@ -988,7 +988,7 @@ void on_down_remote(asl_impl self, module_id src, const asl_down& d) {
   auto reason = from_wire(d.reason);
   for (auto id : bindings_to(self, src, d.apo)) {
     auto& b = st.bindings[id];
-    auto err = make_error(ec::apo_gone, describe(b.target) + " exited");
+    auto err = make_error(app_ec::apo_gone, describe(b.target) + " exited");
     lose_target(self, id, reason ? reason : caf::error{}, err);
   }
 }
@@ -1013,7 +1013,7 @@ void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
   // Rebinding proxies of this module bound to it.
   for (auto id : bindings_to(self, st.self_id, apo))
     lose_target(self, id, reason,
-                make_error(ec::apo_gone, "APO '" + name + "' exited"));
+                make_error(app_ec::apo_gone, "APO '" + name + "' exited"));
 }
 
 // -- topics --------------------------------------------------------------------------
@@ -1124,7 +1124,7 @@ void on_remote_publication(asl_impl self, module_id src, asl_publish& p) {
   auto msg = unmarshal(self->system(), p.payload.data(), p.payload.size(),
                        st.cfg.limits);
   if (!msg) {
-    if (is(msg.error(), ec::unknown_type))
+    if (is(msg.error(), app_ec::unknown_type))
       ++st.stats.rx_unknown_type;
     else
       ++st.stats.rx_malformed;
@@ -1188,7 +1188,7 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
         } else
           transmit(self, src,
                    asl_down{x.apo, to_wire(make_error(
-                                     ec::apo_gone,
+                                     app_ec::apo_gone,
                                      "no APO " + std::to_string(x.apo)
                                        + " on module " + to_hex(st.self_id)))});
       } else if constexpr (std::is_same_v<T, asl_unwatch>) {
@@ -1196,7 +1196,7 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
       } else if constexpr (std::is_same_v<T, asl_down>) {
         on_down_remote(self, src, x);
       } else if constexpr (std::is_same_v<T, asl_withdraw>) {
-        asl_down d{x.apo, to_wire(make_error(ec::apo_gone, "withdrawn"))};
+        asl_down d{x.apo, to_wire(make_error(app_ec::apo_gone, "withdrawn"))};
         on_down_remote(self, src, d);
       } else if constexpr (std::is_same_v<T, asl_subscribe>) {
         on_remote_subscribe(self, src, x);
@@ -1219,7 +1219,7 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
 /// Module `m` stayed unreachable past the grace period.
 void module_lost(asl_impl self, module_id m) {
   auto& st = self->state;
-  auto err = make_error(ec::no_route, "module " + to_hex(m) + " unreachable");
+  auto err = make_error(routing_ec::no_route, "module " + to_hex(m) + " unreachable");
   // Reliable bindings ride it out: their requests wait for the module or
   // their deadline.
   for (auto id : bindings_to(self, m, 0))
@@ -1289,9 +1289,9 @@ void tick(asl_impl self) {
       if (out.reliable) {
         auto b = st.bindings.find(out.binding);
         if (b == st.bindings.end() || !b->second.bound)
-          err = make_error(ec::apo_gone, "no APO to send it to" + within);
+          err = make_error(app_ec::apo_gone, "no APO to send it to" + within);
         else if (!reachable(self, b->second.target.module))
-          err = make_error(ec::no_route, "module "
+          err = make_error(routing_ec::no_route, "module "
                                            + to_hex(b->second.target.module)
                                            + " stayed unreachable" + within);
       }
@@ -1332,7 +1332,7 @@ void tick(asl_impl self) {
 }
 
 /// The routing agent ended: nothing can be sent any more. Every request
-/// waiting for the network fails with ec::unavailable, proxies end with it,
+/// waiting for the network fails with app_ec::unavailable, proxies end with it,
 /// and so does anything asked later (the layer stays up to say why).
 void agent_stopped(asl_impl self, const caf::error& reason) {
   auto& st = self->state;
@@ -1410,13 +1410,13 @@ caf::result<caf::actor> bind_ref(asl_impl self, const apo_ref& ref,
   if (ref.module == st.self_id) {
     auto i = st.apos.find(ref.apo);
     if (i == st.apos.end())
-      return make_error(ec::apo_gone, describe(ref));
+      return make_error(app_ec::apo_gone, describe(ref));
     return i->second;
   }
   if (auto err = agent_gone(self))
     return err;
   if (!reachable(self, ref.module))
-    return make_error(ec::no_route, "no route to module " + to_hex(ref.module));
+    return make_error(routing_ec::no_route, "no route to module " + to_hex(ref.module));
   return make_binding(self, &ref, nullptr, reliable, sign);
 }
 
@@ -1446,7 +1446,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
     auto& st = self->state;
     if (msg.source == st.agent.address()) {
       agent_stopped(self, msg.reason ? msg.reason
-                                     : make_error(ec::unavailable, "exited"));
+                                     : make_error(app_ec::unavailable, "exited"));
       return;
     }
     if (auto i = st.apo_of.find(msg.source); i != st.apo_of.end())
@@ -1469,7 +1469,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       if (auto i = st.apo_of.find(apo.address()); i != st.apo_of.end()) {
         self->demonitor(apo);
         withdraw(self, i->second,
-                 make_error(ec::apo_gone, "unregistered"));
+                 make_error(app_ec::apo_gone, "unregistered"));
       }
     },
     [self](atom::get, atom::apps) -> std::vector<apo_info> {
@@ -1522,7 +1522,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       discover(self, q, [self, rp, req](std::vector<apo_ref> found) mutable {
         auto& st = self->state;
         if (found.empty()) {
-          rp.deliver(make_error(ec::not_found,
+          rp.deliver(make_error(app_ec::not_found,
                                 "no APO " + std::string{req.by == query_by::type
                                                           ? "of type '"
                                                           : "named '"}
@@ -1535,7 +1535,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
           if (auto i = st.apos.find(ref.apo); i != st.apos.end())
             rp.deliver(i->second);
           else
-            rp.deliver(make_error(ec::apo_gone, describe(ref)));
+            rp.deliver(make_error(app_ec::apo_gone, describe(ref)));
           return;
         }
         rp.deliver(make_binding(self, &ref, &req));

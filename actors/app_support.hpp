@@ -73,10 +73,10 @@ typename Inspector::result_type inspect(Inspector& f, apo_query& x) {
 /// Binding by name or type: discover, then bind the first match (a local
 /// match first). With `rebind`, the proxy outlives its target: when the APO
 /// exits or its module becomes unreachable, requests fail at once with
-/// ec::apo_gone until a new match appears (looked for every
+/// app_ec::apo_gone until a new match appears (looked for every
 /// `app_support_config::rebind_interval`), then go to it. Without `rebind`
 /// the proxy ends with its target (monitors get a down message). Fails with
-/// ec::not_found when nothing answered within `timeout_ms`.
+/// app_ec::not_found when nothing answered within `timeout_ms`.
 ///
 /// With `reliable`, requests and one-way messages through the proxy travel
 /// in reliable mode (docs/reliability.md, "Reliable requests"): the
@@ -86,7 +86,7 @@ typename Inspector::result_type inspect(Inspector& f, apo_query& x) {
 /// from a cache of recent responses). A reliable binding rides out
 /// unreachability: its requests wait and are retransmitted when the module
 /// is back, and fail only at their deadline (`request_timeout`) with
-/// ec::no_route (the module stayed unreachable), ec::apo_gone (nothing bound
+/// routing_ec::no_route (the module stayed unreachable), app_ec::apo_gone (nothing bound
 /// to a rebinding proxy) or ec::timeout (reachable, but no response).
 struct bind_request {
   query_by by = query_by::name;
@@ -110,7 +110,7 @@ typename Inspector::result_type inspect(Inspector& f, bind_request& x) {
 /// (packet_delivered::authenticated, a keyed network, whatever its
 /// `auth.data`), or if this module has no key and
 /// app_support_config::allow_unsigned_remote is set. Anything else is
-/// refused with ec::unauthorized and counted (rx_unauthorized). A binding
+/// refused with app_ec::unauthorized and counted (rx_unauthorized). A binding
 /// made `signed_only` asks the routing agent to sign its requests
 /// (send_packet::sign), and the APO's responses are signed too.
 enum class apo_access : uint8_t {
@@ -167,7 +167,7 @@ struct app_support_stats {
   // -- refusals at the bounds of what the network can make this module hold --
   /// Requests for a `signed_only` APO (remote control) that did not arrive
   /// signed, or reached a module without a key that does not allow
-  /// unsigned remote control: answered with ec::unauthorized.
+  /// unsigned remote control: answered with app_ec::unauthorized.
   uint64_t rx_unauthorized = 0;
   /// Requests answered with ec::queue_full because max_pending requests of
   /// other modules were being served.
@@ -250,7 +250,7 @@ using app_support_actor = caf::typed_actor<
   // -- discovery and binding ------------------------------------------------------
   caf::replies_to<atom::find, apo_query>::with<std::vector<apo_ref>>,
   /// A proxy for the APO `ref` names (the local actor itself if it is ours).
-  /// Errors: ec::apo_gone (not registered there), ec::no_route.
+  /// Errors: app_ec::apo_gone (not registered there), routing_ec::no_route.
   caf::replies_to<atom::bind, apo_ref>::with<caf::actor>,
   /// The same, `true`: in reliable mode (see bind_request::reliable).
   caf::replies_to<atom::bind, apo_ref, bool>::with<caf::actor>,
@@ -288,7 +288,7 @@ struct app_support_config {
   /// requester's own `request(..., timeout)` may end it sooner).
   std::chrono::milliseconds request_timeout{10000};
   /// A module unreachable for this long ends the proxies bound to it
-  /// (ec::no_route); shorter outages while routes converge are ridden out.
+  /// (routing_ec::no_route); shorter outages while routes converge are ridden out.
   std::chrono::milliseconds unreachable_grace{1000};
   /// How often a rebinding proxy without a target looks for one.
   std::chrono::milliseconds rebind_interval{1000};

@@ -58,10 +58,10 @@ std::string error_reply(const std::string& code, const std::string& message) {
 }
 
 /// CAF's codes a user could meet, as HERM's own: an actor of this module
-/// that stopped is ec::unavailable, a request that timed out ec::timeout.
+/// that stopped is app_ec::unavailable, a request that timed out ec::timeout.
 caf::error herm_error(const caf::error& err) {
   if (err == caf::sec::request_receiver_down)
-    return make_error(ec::unavailable,
+    return make_error(app_ec::unavailable,
                       "a core actor of this module (IO manager, routing agent "
                       "or application support) has stopped");
   if (err == caf::sec::request_timeout)
@@ -76,7 +76,7 @@ std::string error_code(const caf::error& raw) {
   if (!err)
     return "none";
   if (err.category() == caf::atom("herm"))
-    return to_string(static_cast<ec>(err.code()));
+    return error_name(err.code());
   if (err.category() == caf::atom("system")
       && static_cast<caf::sec>(err.code()) == caf::sec::request_timeout)
     return "timeout";
@@ -391,7 +391,7 @@ void resolve(control_impl self, module_id target, module_id self_id,
     return;
   }
   auto unknown = [target] {
-    return make_error(ec::not_found, "unknown module " + to_hex(target)
+    return make_error(app_ec::not_found, "unknown module " + to_hex(target)
                                        + " (not reachable or no control service)");
   };
   auto bind = [self, target, timeout, next](apo_ref ref) {

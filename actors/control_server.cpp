@@ -531,7 +531,7 @@ caf::expected<std::string> control_call(const std::string& path,
       != 0) {
     auto err = errno;
     if (err == ENOENT || err == ECONNREFUSED || err == ENOTDIR)
-      return make_error(ec::not_found, "no module listening at " + path
+      return make_error(app_ec::not_found, "no module listening at " + path
                                          + " (is hermd running?)");
     return make_error(ec::device_unavailable,
                       "cannot connect to " + path + ": " + errno_text(err));

@@ -524,7 +524,7 @@ caf::expected<caf::message> unmarshal(caf::actor_system& sys,
                                                  + ": " + source.reason());
     auto value = types.make_value(name);
     if (!value)
-      return make_error(ec::unknown_type, "element " + std::to_string(i)
+      return make_error(app_ec::unknown_type, "element " + std::to_string(i)
                                                  + ": unknown type '" + name
                                                  + "'");
     source.start_element();

@@ -62,7 +62,7 @@ caf::expected<byte_buffer> marshal(caf::actor_system& sys,
 /// accepted: a decoded message re-encodes to exactly the input bytes.
 /// Values are created by name through the system's type registry; actor
 /// handles are refused, never resolved. A type name the registry does not
-/// know yields `ec::unknown_type` instead (the sender speaks a type this
+/// know yields `app_ec::unknown_type` instead (the sender speaks a type this
 /// module was not built with).
 caf::expected<caf::message> unmarshal(caf::actor_system& sys,
                                       const uint8_t* data, size_t size,

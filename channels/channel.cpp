@@ -11,8 +11,8 @@
 #include "caf/stateful_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
 
-#include "actors/runtime/error.hpp"
-#include "actors/runtime/type_ids.hpp"
+#include "channels/error.hpp"
+#include "channels/type_ids.hpp"
 #include "channels/port.hpp"
 #include "channels/tx_backlog.hpp"
 

@@ -7,7 +7,7 @@
 #include "caf/replies_to.hpp"
 #include "caf/typed_actor.hpp"
 
-#include "actors/runtime/atoms.hpp"
+#include "channels/atoms.hpp"
 #include "channels/messages.hpp"
 
 namespace herm {

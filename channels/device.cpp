@@ -9,8 +9,8 @@
 #include "caf/stateful_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
 
-#include "actors/runtime/error.hpp"
-#include "actors/runtime/type_ids.hpp"
+#include "channels/error.hpp"
+#include "channels/type_ids.hpp"
 #include "channels/channel.hpp"
 #include "channels/link_driver.hpp"
 

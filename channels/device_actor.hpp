@@ -9,7 +9,7 @@
 #include "caf/replies_to.hpp"
 #include "caf/typed_actor.hpp"
 
-#include "actors/runtime/atoms.hpp"
+#include "channels/atoms.hpp"
 #include "channels/channel_actor.hpp"
 #include "channels/messages.hpp"
 

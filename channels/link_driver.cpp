@@ -1,6 +1,6 @@
 #include "channels/link_driver.hpp"
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/options.hpp"
 
 namespace herm {

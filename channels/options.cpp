@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 
 namespace herm {
 

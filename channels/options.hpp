@@ -8,7 +8,7 @@
 #include "caf/expected.hpp"
 
 #include "channels/link_profile.hpp"
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/messages.hpp"
 
 namespace herm {

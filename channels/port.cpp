@@ -1,6 +1,6 @@
 #include "channels/port.hpp"
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 
 namespace herm {
 

@@ -14,7 +14,7 @@
 #include <openssl/params.h>
 #include <openssl/rand.h>
 
-#include "actors/runtime/error.hpp"
+#include "routing/error.hpp"
 
 namespace herm {
 

@@ -11,8 +11,8 @@
 #include "caf/stateful_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
 
-#include "actors/runtime/error.hpp"
-#include "actors/runtime/type_ids.hpp"
+#include "routing/error.hpp"
+#include "routing/type_ids.hpp"
 #include "routing/address_allocator.hpp"
 #include "routing/wire.hpp"
 
@@ -984,7 +984,7 @@ caf::error originate(agent_impl self, send_packet& msg) {
   auto& st = self->state;
   auto self_id = st.table.self();
   if (!st.alloc->assigned())
-    return make_error(ec::no_route, "module has no address yet (claiming)");
+    return make_error(routing_ec::no_route, "module has no address yet (claiming)");
   data_header h;
   h.src = self_id;
   h.dst = msg.dst;
@@ -1014,11 +1014,11 @@ caf::error originate(agent_impl self, send_packet& msg) {
     return caf::none;
   }
   if (!is_unicast(msg.dst))
-    return make_error(ec::no_route, "cannot send to " + to_hex(msg.dst));
+    return make_error(routing_ec::no_route, "cannot send to " + to_hex(msg.dst));
   auto nh = st.table.lookup(msg.dst, h.size_class);
   if (!nh) {
     ++st.stats.dropped_no_route;
-    return make_error(ec::no_route, "no route to module " + to_hex(msg.dst));
+    return make_error(routing_ec::no_route, "no route to module " + to_hex(msg.dst));
   }
   if (st.cfg.observer)
     st.cfg.observer(self_id, h, bytes);

@@ -14,7 +14,7 @@
 #include "caf/replies_to.hpp"
 #include "caf/typed_actor.hpp"
 
-#include "actors/runtime/atoms.hpp"
+#include "routing/atoms.hpp"
 #include "channels/io_manager.hpp"
 #include "channels/messages.hpp"
 #include "routing/auth.hpp"
@@ -262,7 +262,7 @@ using routing_agent_actor = caf::typed_actor<
   /// Sends a data packet; one-way: failures are counted.
   caf::reacts_to<send_packet>,
   /// Sends a data packet; the reply says whether a route existed
-  /// (ec::no_route naming the destination otherwise).
+  /// (routing_ec::no_route naming the destination otherwise).
   caf::replies_to<atom::send, send_packet>::with<void>,
   /// Registers the receiver of one protocol.
   caf::reacts_to<atom::subscribe, uint8_t, network_receiver_actor>,

@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <string>
 
-#include "actors/runtime/error.hpp"
+#include "routing/error.hpp"
 
 namespace herm {
 

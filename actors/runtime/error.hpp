@@ -1,48 +1,16 @@
 #pragma once
 
-#include <cstdint>
-#include <string>
-
-#include "caf/error.hpp"
+#include "routing/error.hpp"
 
 namespace herm {
 
-/// Every error HERM reports, as one enum registered with CAF under the
-/// category atom "herm". Errors travel as `caf::error` with a human-readable
-/// context string that names the device, address or field at fault.
-enum class ec : uint8_t {
-  none = 0,
-  /// No device with that name is registered with the IO manager.
-  unknown_device,
-  /// No link kind with that name is compiled in.
-  unknown_link_kind,
-  /// A device or channel address does not parse for its link kind.
-  invalid_address,
-  /// A parameter name is unknown or its value is impossible.
-  invalid_parameter,
-  /// A device exists but cannot be opened now (errno text in the context).
-  device_unavailable,
-  /// A device failed while in use (socket error, file removed, peer gone).
-  device_failed,
-  /// The channel was closed by its owner.
-  channel_closed,
-  /// No channel with that id is in the channel table.
-  unknown_channel,
-  /// A packet is larger than the channel can carry, even fragmented.
-  packet_too_large,
-  /// A bounded queue is full; the item was dropped.
-  queue_full,
-  /// A name is already taken (device name, channel).
-  already_exists,
-  /// A configuration file is invalid (file, line and field in the context).
-  invalid_config,
-  /// A request did not complete in time.
-  timeout,
-  /// No route to the destination module.
-  no_route,
+/// The Application Support Layer's errors: codes from `routing_ec_end` of
+/// the "herm" category (channels/error.hpp says how the layers share it).
+/// Including this header gives every layer's errors.
+enum class app_ec : uint8_t {
   /// A message names a type this module does not know (an APO payload whose
   /// type name is not in the receiving module's type-ID blocks).
-  unknown_type,
+  unknown_type = routing_ec_end,
   /// The remote application object exited, or its module restarted.
   apo_gone,
   /// Nothing matched (discovery found no application object).
@@ -57,20 +25,16 @@ enum class ec : uint8_t {
   unavailable,
 };
 
-/// Returns the enumerator's name, e.g. "unknown_device".
-const char* to_string(ec x);
+/// The first code after this layer's range.
+constexpr uint8_t app_ec_end = static_cast<uint8_t>(app_ec::unavailable) + 1;
 
-/// Creates a `caf::error` in the "herm" category.
-caf::error make_error(ec x);
+/// Returns the enumerator's name, e.g. "apo_gone".
+const char* to_string(app_ec x);
 
-/// Creates a `caf::error` in the "herm" category with a context message that
-/// says what was wrong, e.g. "device 'can9': no such interface".
-caf::error make_error(ec x, std::string context);
-
-/// Returns true if `err` is the HERM error `x`.
-bool is(const caf::error& err, ec x);
-
-/// Renders any error, HERM's or CAF's, as "category.name: context".
-std::string render(const caf::error& err);
+// Out of line, so that whoever makes or tests these errors links the
+// names error_name() and render() give them.
+caf::error make_error(app_ec x);
+caf::error make_error(app_ec x, std::string context);
+bool is(const caf::error& err, app_ec x);
 
 } // namespace herm

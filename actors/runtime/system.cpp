@@ -11,12 +11,14 @@ namespace herm {
 namespace {
 
 void register_types(caf::actor_system_config& cfg) {
-  cfg.add_message_types<caf::id_block::herm>();
+  cfg.add_message_types<caf::id_block::herm_channels>();
+  cfg.add_message_types<caf::id_block::herm_routing>();
+  cfg.add_message_types<caf::id_block::herm_asl>();
   cfg.add_error_category(caf::atom("herm"),
                          [](uint8_t code, caf::atom_value,
                             const caf::message& ctx) -> std::string {
                            std::string result = "herm.";
-                           result += to_string(static_cast<ec>(code));
+                           result += error_name(code);
                            if (ctx.match_elements<std::string>()) {
                              result += ": ";
                              result += ctx.get_as<std::string>(0);

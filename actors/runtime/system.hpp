@@ -7,8 +7,9 @@
 
 namespace herm {
 
-/// Prepares an actor system configuration for HERM: registers the project's
-/// type-ID block and the "herm" error category, and selects the scheduler.
+/// Prepares an actor system configuration for HERM: registers HERM's three
+/// type-ID blocks (one per layer) and the "herm" error category, and
+/// selects the scheduler.
 ///
 /// `scheduler_policy` is "sharing" (default: one shared queue, about 12 us
 /// per cross-thread wake-up on small machines) or "stealing" (CAF's default,

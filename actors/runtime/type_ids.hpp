@@ -1,70 +1,38 @@
 #pragma once
 
-// HERM's one project-wide type-ID block. Every type that travels in a
-// message between actors has an entry here; the build defines
-// CAF_ENABLE_TYPE_ID_CHECKS, so a missing entry is a compile error.
-// Append new entries at the end of their layer's section only: IDs are
-// assigned in order.
+// The Application Support Layer's type-ID block, the last of HERM's three
+// (docs/architecture.md, "Type IDs and errors"). It starts where the
+// Network Adaptation Layer's block ends; including this header gives all
+// three. An application's own block starts at `caf::id_block::herm::end`,
+// the end of HERM's IDs.
+// CAF_ENABLE_TYPE_ID_CHECKS is on, so a missing entry is a compile error.
+// Append new entries at the end only: IDs are assigned in order, and the
+// next layer's block starts where this one ends.
 
-#include <string>
 #include <vector>
 
-#include "caf/type_id.hpp"
-
 #include "actors/app_support.hpp"
-#include "channels/channel_actor.hpp"
-#include "channels/device_actor.hpp"
-#include "channels/io_manager.hpp"
-#include "channels/messages.hpp"
-#include "routing/routing_agent.hpp"
+#include "routing/type_ids.hpp"
 
-CAF_BEGIN_TYPE_ID_BLOCK(herm, caf::first_custom_type_id)
+CAF_BEGIN_TYPE_ID_BLOCK(herm_asl, caf::id_block::herm_routing::end)
 
-  // -- Network Interface Layer ---------------------------------------------------
-  CAF_ADD_TYPE_ID(herm, (herm::write_packet))
-  CAF_ADD_TYPE_ID(herm, (herm::packet_received))
-  CAF_ADD_TYPE_ID(herm, (herm::link_event))
-  CAF_ADD_TYPE_ID(herm, (herm::frame_received))
-  CAF_ADD_TYPE_ID(herm, (herm::device_failed))
-  CAF_ADD_TYPE_ID(herm, (herm::device_config))
-  CAF_ADD_TYPE_ID(herm, (herm::device_info))
-  CAF_ADD_TYPE_ID(herm, (std::vector<herm::device_info>))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_request))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_info))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_stats))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_entry))
-  CAF_ADD_TYPE_ID(herm, (std::vector<herm::channel_entry>))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_up))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_down))
-  CAF_ADD_TYPE_ID(herm, (herm::link_profile))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_reader_actor))
-  CAF_ADD_TYPE_ID(herm, (herm::channel_actor))
-  CAF_ADD_TYPE_ID(herm, (herm::device_actor))
-  CAF_ADD_TYPE_ID(herm, (herm::io_listener_actor))
-  CAF_ADD_TYPE_ID(herm, (herm::io_manager_actor))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::apo_ref))
+  CAF_ADD_TYPE_ID(herm_asl, (std::vector<herm::apo_ref>))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::apo_query))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::bind_request))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::apo_info))
+  CAF_ADD_TYPE_ID(herm_asl, (std::vector<herm::apo_info>))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::app_support_stats))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::app_support_actor))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::apo_access))
 
-  // -- Network Adaptation Layer ----------------------------------------------------
-  CAF_ADD_TYPE_ID(herm, (herm::send_packet))
-  CAF_ADD_TYPE_ID(herm, (herm::packet_delivered))
-  CAF_ADD_TYPE_ID(herm, (herm::neighbour_info))
-  CAF_ADD_TYPE_ID(herm, (std::vector<herm::neighbour_info>))
-  CAF_ADD_TYPE_ID(herm, (herm::route_info))
-  CAF_ADD_TYPE_ID(herm, (std::vector<herm::route_info>))
-  CAF_ADD_TYPE_ID(herm, (herm::routing_stats))
-  CAF_ADD_TYPE_ID(herm, (herm::network_receiver_actor))
-  CAF_ADD_TYPE_ID(herm, (herm::routing_agent_actor))
-  CAF_ADD_TYPE_ID(herm, (herm::reachability))
-  CAF_ADD_TYPE_ID(herm, (herm::route_listener_actor))
+CAF_END_TYPE_ID_BLOCK(herm_asl)
 
-  // -- Application Support Layer ---------------------------------------------------
-  CAF_ADD_TYPE_ID(herm, (herm::apo_ref))
-  CAF_ADD_TYPE_ID(herm, (std::vector<herm::apo_ref>))
-  CAF_ADD_TYPE_ID(herm, (herm::apo_query))
-  CAF_ADD_TYPE_ID(herm, (herm::bind_request))
-  CAF_ADD_TYPE_ID(herm, (herm::apo_info))
-  CAF_ADD_TYPE_ID(herm, (std::vector<herm::apo_info>))
-  CAF_ADD_TYPE_ID(herm, (herm::app_support_stats))
-  CAF_ADD_TYPE_ID(herm, (herm::app_support_actor))
-  CAF_ADD_TYPE_ID(herm, (herm::apo_access))
+namespace caf::id_block {
 
-CAF_END_TYPE_ID_BLOCK(herm)
+/// All of HERM's type IDs end where the last block ends: applications chain
+/// their own blocks from `caf::id_block::herm::end`. herm::configure
+/// registers the three blocks; do not pass this alias to add_message_types.
+using herm = herm_asl;
+
+} // namespace caf::id_block

@@ -63,7 +63,7 @@ inline app_support_actor apps_of(sim_network& net, size_t i) {
 /// actors next run, then `net.at(i).apos` holds its `apo_ref`. A refused
 /// registration (e.g. a name over 255 bytes) is written to stderr, and the
 /// APO stays unknown to the network (binding to it fails with
-/// ec::not_found). Returns the APO's handle.
+/// app_ec::not_found). Returns the APO's handle.
 template <class... Ts>
 auto spawn_apo(sim_network& net, size_t i, std::string name, std::string type,
                Ts&&... xs) {
@@ -93,7 +93,7 @@ auto spawn_apo(sim_network& net, size_t i, std::string name, std::string type,
 /// `(atom::bind, req)` at its application support actor does, moving
 /// simulated time until the answer (at most `req.timeout_ms` plus 100 ms).
 /// Returns the proxy (or the APO itself if it lives on module `i`), or the
-/// error: ec::not_found when nothing answered, ec::no_route, ec::timeout
+/// error: app_ec::not_found when nothing answered, routing_ec::no_route, ec::timeout
 /// when the layer did not answer in time.
 inline caf::expected<caf::actor> bind_apo(sim_network& net, size_t i,
                                           bind_request req) {
@@ -106,8 +106,8 @@ inline caf::expected<caf::actor> bind_apo(sim_network& net, size_t i,
 }
 
 /// Binds from module `i` to the APO `ref` names (from `find`, or
-/// `net.at(j).apos`), without discovery. Errors: ec::apo_gone,
-/// ec::no_route.
+/// `net.at(j).apos`), without discovery. Errors: app_ec::apo_gone,
+/// routing_ec::no_route.
 inline caf::expected<caf::actor> bind_apo(sim_network& net, size_t i,
                                           apo_ref ref) {
   auto res = net.harness().call<caf::actor>(apps_of(net, i), atom::bind_v,

@@ -314,7 +314,7 @@ caf::actor bind_by_name(caf::scoped_actor& self, const module_handles& m,
                   bind_request{query_by::name, name, 1000, rebind, reliable})
       .receive([&](caf::actor& p) { proxy = p; },
                [&](caf::error& e) { err = e; });
-    if (!proxy && !is(err, ec::not_found) && !is(err, ec::no_route))
+    if (!proxy && !is(err, app_ec::not_found) && !is(err, routing_ec::no_route))
       break;
     if (!proxy)
       nap(100ms);

@@ -70,7 +70,7 @@
 #include <linux/can/error.h>
 #include <linux/can/raw.h>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/can_emu_wire.hpp"
 #include "channels/drivers/can_id.hpp"
 #include "channels/drivers/medium_dir.hpp"

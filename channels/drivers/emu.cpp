@@ -41,7 +41,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/emu_wire.hpp"
 #include "channels/drivers/medium_dir.hpp"
 #include "channels/drivers/posix.hpp"

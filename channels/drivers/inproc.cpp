@@ -12,7 +12,7 @@
 #include <mutex>
 #include <vector>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
 

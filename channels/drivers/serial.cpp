@@ -52,7 +52,7 @@
 #include <thread>
 #include <vector>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/serial_framing.hpp"
 #include "channels/drivers/serial_settings.hpp"
 #include "channels/drivers/posix.hpp"

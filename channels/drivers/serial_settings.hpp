@@ -32,7 +32,7 @@
 
 #include "caf/expected.hpp"
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/serial_framing.hpp"
 #include "channels/messages.hpp"
 #include "channels/options.hpp"

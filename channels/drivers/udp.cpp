@@ -36,7 +36,7 @@
 #include <thread>
 #include <vector>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/udp_addr.hpp"
 #include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"

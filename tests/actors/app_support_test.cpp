@@ -330,10 +330,10 @@ TEST_F(asl_test, binding_to_a_missing_apo_or_module_fails) {
   auto ref = add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
   auto nowhere = bind(0, apo_ref{0x77, 1, "x", "t"});
   ASSERT_FALSE(nowhere);
-  EXPECT_TRUE(is(nowhere.error(), ec::no_route)) << render(nowhere.error());
+  EXPECT_TRUE(is(nowhere.error(), routing_ec::no_route)) << render(nowhere.error());
   auto missing = bind(0, bind_request{query_by::name, "ghost", 200, false});
   ASSERT_FALSE(missing);
-  EXPECT_TRUE(is(missing.error(), ec::not_found)) << render(missing.error());
+  EXPECT_TRUE(is(missing.error(), app_ec::not_found)) << render(missing.error());
   // A stale number: the proxy ends at once (the far end says it is gone).
   auto stale = ref;
   stale.apo += 1000;
@@ -344,7 +344,7 @@ TEST_F(asl_test, binding_to_a_missing_apo_or_module_fails) {
   caf::anon_send(watcher, atom::add_v, *proxy);
   run();
   ASSERT_EQ(log->downs.size(), 1u);
-  EXPECT_TRUE(is(log->downs[0].reason, ec::apo_gone)) << render(log->downs[0].reason);
+  EXPECT_TRUE(is(log->downs[0].reason, app_ec::apo_gone)) << render(log->downs[0].reason);
   auto after = ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{2});
   ASSERT_FALSE(after);
 }
@@ -398,7 +398,7 @@ TEST_F(asl_test, a_monitor_of_a_proxy_learns_when_the_remote_module_dies) {
   // waits the grace period (300 ms here) before giving up.
   net->advance(1500ms);
   ASSERT_EQ(log->downs.size(), 1u);
-  EXPECT_TRUE(is(log->downs[0].reason, ec::no_route)) << render(log->downs[0].reason);
+  EXPECT_TRUE(is(log->downs[0].reason, routing_ec::no_route)) << render(log->downs[0].reason);
   auto after = ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{2});
   ASSERT_FALSE(after);
   EXPECT_EQ(stats(0).proxies_ended, 1u);
@@ -414,7 +414,7 @@ TEST_F(asl_test, a_pending_request_fails_when_the_module_becomes_unreachable) {
   // requester hears no_route well before the 2 s request deadline.
   auto res = ask<int32_t>(*proxy, 1500ms, int32_t{1}, int32_t{2});
   ASSERT_FALSE(res);
-  EXPECT_TRUE(is(res.error(), ec::no_route)) << render(res.error());
+  EXPECT_TRUE(is(res.error(), routing_ec::no_route)) << render(res.error());
   net->restore(0);
 }
 
@@ -428,7 +428,7 @@ TEST_F(asl_test, a_rebinding_proxy_resumes_when_the_module_returns) {
   net->advance(1500ms);
   auto gone = ask<int32_t>(*proxy, 1s, int32_t{1}, int32_t{2});
   ASSERT_FALSE(gone);
-  EXPECT_TRUE(is(gone.error(), ec::apo_gone)) << render(gone.error());
+  EXPECT_TRUE(is(gone.error(), app_ec::apo_gone)) << render(gone.error());
   // The module comes back with a new calculator under the same name.
   net->start_module(1);
   net->advance(1s);
@@ -565,7 +565,7 @@ TEST_F(asl_test, bad_input_is_dropped_and_counted_or_answered_with_an_error) {
   send_raw({0x07, 0x03, 0xFF});
   EXPECT_EQ(stats(1).rx_malformed, 2u);
   EXPECT_TRUE(got->empty());
-  // A payload naming a type this module does not know: ec::unknown_type.
+  // A payload naming a type this module does not know: app_ec::unknown_type.
   byte_buffer unknown{apo_format_version, 1, 8};
   for (char c : std::string{"foo::bar"})
     unknown.push_back(static_cast<uint8_t>(c));
@@ -574,7 +574,7 @@ TEST_F(asl_test, bad_input_is_dropped_and_counted_or_answered_with_an_error) {
   auto r = last_response();
   EXPECT_EQ(r.request_id, 77u);
   EXPECT_FALSE(r.ok);
-  EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::unknown_type));
+  EXPECT_EQ(r.error.code, static_cast<uint8_t>(app_ec::unknown_type));
   EXPECT_NE(r.error.context.find("foo::bar"), std::string::npos);
   EXPECT_EQ(stats(1).rx_unknown_type, 1u);
   // A payload that does not decode: invalid_parameter.
@@ -588,7 +588,7 @@ TEST_F(asl_test, bad_input_is_dropped_and_counted_or_answered_with_an_error) {
   send_raw(enc(asl_request{79, ref.apo + 1, *good}));
   r = last_response();
   EXPECT_EQ(r.request_id, 79u);
-  EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::apo_gone));
+  EXPECT_EQ(r.error.code, static_cast<uint8_t>(app_ec::apo_gone));
   // The same request to the right APO is served.
   send_raw(enc(asl_request{80, ref.apo, *good}));
   r = last_response();
@@ -867,7 +867,7 @@ TEST_F(asl_reliable_test, a_destination_gone_past_the_deadline_gives_no_route_no
   net->advance(400ms);
   ASSERT_EQ(answer->size(), 1u);
   ASSERT_FALSE(answer->front());
-  EXPECT_TRUE(is(answer->front().error(), ec::no_route))
+  EXPECT_TRUE(is(answer->front().error(), routing_ec::no_route))
     << render(answer->front().error());
   EXPECT_EQ(stats(0).request_timeouts, 1u);
   EXPECT_EQ(stats(0).pending_requests, 0u);
@@ -999,7 +999,7 @@ TEST_F(asl_hostile_test, a_signed_only_apo_takes_remote_requests_only_when_signe
   ASSERT_EQ(rs.size(), 2u);
   for (auto& r : rs) {
     EXPECT_FALSE(r.ok);
-    EXPECT_EQ(r.error.code, static_cast<uint8_t>(ec::unauthorized));
+    EXPECT_EQ(r.error.code, static_cast<uint8_t>(app_ec::unauthorized));
     EXPECT_NE(r.error.context.find("herm.control"), std::string::npos);
   }
   // Signed and verified: served.
@@ -1183,15 +1183,15 @@ TEST_F(asl_hostile_test, when_the_routing_agent_dies_callers_get_unavailable_not
   run();
   ASSERT_EQ(waiting->size(), 1u);
   ASSERT_FALSE(waiting->front());
-  EXPECT_TRUE(is(waiting->front().error(), ec::unavailable))
+  EXPECT_TRUE(is(waiting->front().error(), app_ec::unavailable))
     << render(waiting->front().error());
   auto again = bind(0, ref);
   ASSERT_FALSE(again);
-  EXPECT_TRUE(is(again.error(), ec::unavailable)) << render(again.error());
+  EXPECT_TRUE(is(again.error(), app_ec::unavailable)) << render(again.error());
   auto found = call<std::vector<apo_ref>>(
     asl(0), atom::find_v, apo_query{query_by::name, "calc", 100, false});
   ASSERT_FALSE(found);
-  EXPECT_TRUE(is(found.error(), ec::unavailable));
+  EXPECT_TRUE(is(found.error(), app_ec::unavailable));
 }
 
 TEST(unexpected_messages, are_counted_and_logged_at_a_bounded_rate_without_content) {

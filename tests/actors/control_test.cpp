@@ -596,7 +596,7 @@ TEST_F(control_test, no_module_listening_is_a_clear_error) {
   auto path = dir.path() + "/nobody.sock";
   auto reply = control_call(path, R"({"cmd":"info"})", 2s);
   ASSERT_FALSE(reply);
-  EXPECT_TRUE(is(reply.error(), ec::not_found)) << render(reply.error());
+  EXPECT_TRUE(is(reply.error(), app_ec::not_found)) << render(reply.error());
   auto text = render(reply.error());
   EXPECT_NE(text.find(path), std::string::npos) << text;
   EXPECT_NE(text.find("hermd"), std::string::npos) << text;
@@ -605,7 +605,7 @@ TEST_F(control_test, no_module_listening_is_a_clear_error) {
   EXPECT_FALSE(std::filesystem::exists(socket));
   reply = control_call(socket, R"({"cmd":"info"})", 2s);
   ASSERT_FALSE(reply);
-  EXPECT_TRUE(is(reply.error(), ec::not_found));
+  EXPECT_TRUE(is(reply.error(), app_ec::not_found));
 }
 
 // -- the socket -------------------------------------------------------------------------

@@ -147,7 +147,7 @@ TEST(multiprocess_asl, hermds_echo_apo_answers_a_string_request) {
 
 // A (0x34) --udp-- S (0x35). Once A's requests are answered it watches its
 // proxy; S is killed (no goodbye on the wire): A's routes to S time out,
-// and after the unreachable grace the proxy ends with ec::no_route.
+// and after the unreachable grace the proxy ends with routing_ec::no_route.
 TEST(multiprocess_asl, a_proxy_ends_when_the_serving_module_is_killed) {
   auto pa = next_port();
   auto ps = next_port();

@@ -3,7 +3,7 @@
 //
 // Properties checked for every input:
 // - unmarshal is total: a message, ec::invalid_parameter or
-//   ec::unknown_type (a type name this module does not know);
+//   app_ec::unknown_type (a type name this module does not know);
 // - the format is canonical: a decoded message re-marshals to exactly the
 //   input, and unmarshalling that again gives the same message;
 // - limits only ever refuse: what decodes under tight unmarshal_limits
@@ -38,7 +38,7 @@ caf::actor_system* sys = nullptr;
 
 bool refused_properly(const caf::error& err) {
   return herm::is(err, herm::ec::invalid_parameter)
-         || herm::is(err, herm::ec::unknown_type);
+         || herm::is(err, herm::app_ec::unknown_type);
 }
 
 } // namespace

@@ -178,7 +178,7 @@ TEST_F(routing_sim, an_unknown_destination_is_a_typed_error) {
   auto res = call<>(net.at(0).agent, atom::send_v,
                     send_packet{0x999, 0, prio_normal, byte_buffer(4)});
   ASSERT_FALSE(res);
-  EXPECT_TRUE(is(res.error(), ec::no_route));
+  EXPECT_TRUE(is(res.error(), routing_ec::no_route));
   EXPECT_NE(render(res.error()).find("0x999"), std::string::npos);
   auto ok = call<>(net.at(0).agent, atom::send_v,
                    send_packet{id_of(1), 0, prio_normal, byte_buffer(4)});

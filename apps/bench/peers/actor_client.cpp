@@ -65,7 +65,7 @@ void send_next(rtt_client_actor* self) {
       },
       [self](caf::error& err) {
         auto& s = self->state;
-        if (s.retry_no_route && !s.answered && is(err, ec::no_route)) {
+        if (s.retry_no_route && !s.answered && is(err, routing_ec::no_route)) {
           self->delayed_send(self, std::chrono::milliseconds(50), atom::tick_v);
           return;
         }
@@ -196,7 +196,7 @@ void hello(oneway_client_actor* self) {
       [self](caf::error& err) {
         // herm: the route may still be converging right after binding.
         if (++self->state.hello_tries < 100
-            && (is(err, ec::no_route) || err == caf::sec::request_timeout)) {
+            && (is(err, routing_ec::no_route) || err == caf::sec::request_timeout)) {
           self->delayed_send(self, std::chrono::milliseconds(50), atom::retry_v);
           return;
         }

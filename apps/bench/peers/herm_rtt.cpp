@@ -84,9 +84,9 @@ caf::expected<caf::actor> bind_by_name(caf::actor_system& sys,
       .receive([&](caf::actor& x) { proxy = x; }, [&](caf::error& e) { err = e; });
     if (proxy)
       return proxy;
-    if ((!is(err, ec::not_found) && !is(err, ec::no_route))
+    if ((!is(err, app_ec::not_found) && !is(err, routing_ec::no_route))
         || std::chrono::steady_clock::now() >= until)
-      return make_error(ec::not_found, "bind " + name + ": " + render(err));
+      return make_error(app_ec::not_found, "bind " + name + ": " + render(err));
     std::this_thread::sleep_for(50ms);
   }
 }

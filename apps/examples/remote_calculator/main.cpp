@@ -171,7 +171,7 @@ caf::actor bind_calculator(caf::scoped_actor& self, herm::app_support_actor asl)
                [&](caf::error& e) { err = e; });
     if (proxy)
       return proxy;
-    if (!herm::is(err, herm::ec::not_found) && !herm::is(err, herm::ec::no_route)) {
+    if (!herm::is(err, herm::app_ec::not_found) && !herm::is(err, herm::routing_ec::no_route)) {
       say("error " + herm::render(err));
       break;
     }

@@ -191,9 +191,9 @@ TEST_F(sonar_test, a_cut_can_bus_fails_sends_with_typed_errors_until_restored) {
   ASSERT_FALSE(seen->errors.empty());
   // First no_route; once the collector's module has stayed unreachable past
   // the grace period (1 s), the rebinding proxy lets go of it: apo_gone.
-  EXPECT_TRUE(is(seen->errors.front(), ec::no_route))
+  EXPECT_TRUE(is(seen->errors.front(), routing_ec::no_route))
     << render(seen->errors.front());
-  EXPECT_TRUE(is(seen->errors.back(), ec::apo_gone))
+  EXPECT_TRUE(is(seen->errors.back(), app_ec::apo_gone))
     << render(seen->errors.back());
   // The cable is back: the channel reopens at its next retry, routes
   // return, the proxy finds the collector again, readings flow.
@@ -219,7 +219,7 @@ TEST_F(sonar_test, killing_the_router_ends_a_proxy_and_its_monitor_hears_why) {
   net.advance(3s);
   ASSERT_EQ(downs->size(), 1u);
   EXPECT_EQ(downs->front().source, proxy->address());
-  EXPECT_TRUE(is(downs->front().reason, ec::no_route))
+  EXPECT_TRUE(is(downs->front().reason, routing_ec::no_route))
     << render(downs->front().reason);
   // The router restarts; the sonar's rebinding proxy carries on.
   auto before = collected->size();
