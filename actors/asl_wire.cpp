@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "actors/runtime/error.hpp"
+#include "channels/le_codec.hpp"
 
 namespace herm {
 
@@ -112,23 +113,9 @@ size_t wire_length(const std::string& s) {
 
 // -- writing ---------------------------------------------------------------------
 
-/// Appends little-endian integers, strings and payloads.
-struct writer {
-  byte_buffer& out;
-
-  void u8(uint8_t x) {
-    out.push_back(x);
-  }
-
-  void u32(uint32_t x) {
-    for (int i = 0; i < 4; ++i)
-      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
-  }
-
-  void u64(uint64_t x) {
-    for (int i = 0; i < 8; ++i)
-      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
-  }
+/// Appends little-endian integers (le_writer), strings and payloads.
+struct writer : le_writer {
+  using le_writer::le_writer;
 
   /// A name, type or topic: longer than max_asl_string is the caller's error
   /// (sent truncated when assertions are off).
@@ -141,12 +128,12 @@ struct writer {
   void text(const std::string& s) {
     auto n = wire_length(s);
     u8(static_cast<uint8_t>(n));
-    out.insert(out.end(), s.begin(), s.begin() + static_cast<ptrdiff_t>(n));
+    bytes(s.data(), n);
   }
 
   /// The last field: the rest of the message, no length.
   void rest(const byte_buffer& b) {
-    out.insert(out.end(), b.begin(), b.end());
+    bytes(b.data(), b.size());
   }
 
   void error(const wire_error& e) {
@@ -255,14 +242,12 @@ struct error_fields {
 /// field; strings are allocated only once their bytes are known present.
 struct reader {
   const char* who;
-  const uint8_t* data;
-  size_t size;
-  size_t pos = head_size;
+  le_reader in;
   /// The answer entry being read, from 1; 0 outside entries.
   size_t entry = 0;
 
   size_t left() const noexcept {
-    return size - pos;
+    return in.left();
   }
 
   caf::error fail(const std::string& what) const {
@@ -278,73 +263,53 @@ struct reader {
                 + num(left()) + " left)");
   }
 
-  caf::error u8(const char* field, uint8_t& x) {
-    if (auto err = need(field, 1))
+  /// An unsigned integer of sizeof(T) bytes.
+  template <class T>
+  caf::error field(const char* name, T& x) {
+    if (auto err = need(name, sizeof(T)))
       return err;
-    x = data[pos++];
+    x = in.le<T>();
     return caf::none;
   }
 
-  caf::error u32(const char* field, uint32_t& x) {
-    if (auto err = need(field, 4))
-      return err;
-    x = 0;
-    for (int i = 0; i < 4; ++i)
-      x |= uint32_t{data[pos + i]} << (8 * i);
-    pos += 4;
-    return caf::none;
-  }
-
-  caf::error u64(const char* field, uint64_t& x) {
-    if (auto err = need(field, 8))
-      return err;
-    x = 0;
-    for (int i = 0; i < 8; ++i)
-      x |= uint64_t{data[pos + i]} << (8 * i);
-    pos += 8;
-    return caf::none;
-  }
-
-  caf::error boolean(const char* field, bool& x) {
+  caf::error boolean(const char* name, bool& x) {
     uint8_t b = 0;
-    if (auto err = u8(field, b))
+    if (auto err = field(name, b))
       return err;
     if (b > 1)
-      return fail(std::string{field} + " is " + num(b) + ", expected 0 or 1");
+      return fail(std::string{name} + " is " + num(b) + ", expected 0 or 1");
     x = b == 1;
     return caf::none;
   }
 
-  caf::error str(const char* field, std::string& x) {
+  caf::error str(const char* name, std::string& x) {
     if (left() < 1)
-      return fail(std::string{field} + " length truncated (needs 1 byte, 0 left)");
-    size_t n = data[pos++];
-    if (auto err = need(field, n))
+      return fail(std::string{name} + " length truncated (needs 1 byte, 0 left)");
+    size_t n = in.u8();
+    if (auto err = need(name, n))
       return err;
-    x.assign(reinterpret_cast<const char*>(data + pos), n);
-    pos += n;
+    in.str(n, x);
     return caf::none;
   }
 
   void rest(byte_buffer& x) {
-    x.assign(data + pos, data + size);
-    pos = size;
+    in.rest(x);
   }
 
   caf::error error(const error_fields& f, wire_error& x) {
-    if (auto err = u64(f.category, x.category))
+    if (auto err = field(f.category, x.category))
       return err;
-    if (auto err = u8(f.code, x.code))
+    if (auto err = field(f.code, x.code))
       return err;
     return str(f.context, x.context);
   }
 };
 
 caf::error get(reader& r, asl_query& x) {
-  if (auto err = r.u32("query_id", x.query_id))
+  if (auto err = r.field("query_id", x.query_id))
     return err;
   uint8_t by = 0;
-  if (auto err = r.u8("by", by))
+  if (auto err = r.field("by", by))
     return err;
   if (by > max_query_by)
     return r.fail("by " + num(by) + " unknown (0 name, 1 type, 2 any)");
@@ -358,10 +323,10 @@ caf::error get(reader& r, asl_query& x) {
 }
 
 caf::error get(reader& r, asl_answer& x) {
-  if (auto err = r.u32("query_id", x.query_id))
+  if (auto err = r.field("query_id", x.query_id))
     return err;
   uint8_t count = 0;
-  if (auto err = r.u8("count", count))
+  if (auto err = r.field("count", count))
     return err;
   if (count > max_answer_entries)
     return r.fail(num(count) + " entries, at most " + num(max_answer_entries));
@@ -373,7 +338,7 @@ caf::error get(reader& r, asl_answer& x) {
   for (size_t i = 0; i < count; ++i) {
     r.entry = i + 1;
     auto& e = x.entries[i];
-    if (auto err = r.u32("apo", e.apo))
+    if (auto err = r.field("apo", e.apo))
       return err;
     if (auto err = r.str("name", e.name))
       return err;
@@ -385,16 +350,16 @@ caf::error get(reader& r, asl_answer& x) {
 }
 
 caf::error get(reader& r, asl_request& x) {
-  if (auto err = r.u64("request_id", x.request_id))
+  if (auto err = r.field("request_id", x.request_id))
     return err;
-  if (auto err = r.u32("apo", x.apo))
+  if (auto err = r.field("apo", x.apo))
     return err;
   r.rest(x.payload);
   return caf::none;
 }
 
 caf::error get(reader& r, asl_response& x) {
-  if (auto err = r.u64("request_id", x.request_id))
+  if (auto err = r.field("request_id", x.request_id))
     return err;
   if (x.request_id == 0)
     return r.fail("request_id 0 (one-way requests get no response)");
@@ -408,22 +373,22 @@ caf::error get(reader& r, asl_response& x) {
 }
 
 caf::error get(reader& r, asl_watch& x) {
-  return r.u32("apo", x.apo);
+  return r.field("apo", x.apo);
 }
 
 caf::error get(reader& r, asl_unwatch& x) {
-  return r.u32("apo", x.apo);
+  return r.field("apo", x.apo);
 }
 
 caf::error get(reader& r, asl_down& x) {
-  if (auto err = r.u32("apo", x.apo))
+  if (auto err = r.field("apo", x.apo))
     return err;
   return r.error({"reason.category", "reason.code", "reason.context"},
                  x.reason);
 }
 
 caf::error get(reader& r, asl_withdraw& x) {
-  if (auto err = r.u32("apo", x.apo))
+  if (auto err = r.field("apo", x.apo))
     return err;
   return r.str("name", x.name);
 }
@@ -431,7 +396,7 @@ caf::error get(reader& r, asl_withdraw& x) {
 caf::error get(reader& r, asl_subscribe& x) {
   if (auto err = r.str("topic", x.topic))
     return err;
-  return r.u32("lease_ms", x.lease_ms);
+  return r.field("lease_ms", x.lease_ms);
 }
 
 caf::error get(reader& r, asl_unsubscribe& x) {
@@ -441,7 +406,7 @@ caf::error get(reader& r, asl_unsubscribe& x) {
 caf::error get(reader& r, asl_publish& x) {
   if (auto err = r.str("topic", x.topic))
     return err;
-  if (auto err = r.u32("seq", x.seq))
+  if (auto err = r.field("seq", x.seq))
     return err;
   r.rest(x.payload);
   return caf::none;
@@ -452,11 +417,11 @@ caf::error get(reader& r, asl_advertise& x) {
 }
 
 caf::error get(reader& r, asl_reliable_request& x) {
-  if (auto err = r.u64("request_id", x.request_id))
+  if (auto err = r.field("request_id", x.request_id))
     return err;
   if (x.request_id == 0)
     return r.fail("request_id 0 (reliable requests are numbered)");
-  if (auto err = r.u32("apo", x.apo))
+  if (auto err = r.field("apo", x.apo))
     return err;
   if (auto err = r.boolean("oneway", x.oneway))
     return err;
@@ -465,7 +430,7 @@ caf::error get(reader& r, asl_reliable_request& x) {
 }
 
 caf::error get(reader& r, asl_ack& x) {
-  if (auto err = r.u64("request_id", x.request_id))
+  if (auto err = r.field("request_id", x.request_id))
     return err;
   if (x.request_id == 0)
     return r.fail("request_id 0 (reliable requests are numbered)");
@@ -512,7 +477,7 @@ caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size) {
   auto kind = peek_asl_kind(data, size);
   if (!kind)
     return std::move(kind.error());
-  reader r{name_of(*kind), data, size};
+  reader r{name_of(*kind), le_reader{data, size, head_size}};
   switch (*kind) {
     case asl_kind::query:
       return decode_as<asl_query>(r);

@@ -11,7 +11,15 @@
 // of it. Decoders are total: any byte string yields a value or
 // `ec::invalid_parameter` naming the kind and what was wrong; every length
 // and count is checked against the bytes present before anything is
-// allocated; a message with trailing bytes is refused. They are fuzzed.
+// allocated; a message with trailing bytes is refused. They are fuzzed
+// (tests/fuzz/fuzz_asl_wire.cpp).
+//
+// Bounds per call (all through channels/le_codec.hpp): time O(n) in the
+// message size for decode_asl and in the encoded size for encode;
+// peek_asl_kind is O(1). encode allocates nothing but the growth of `out`;
+// decode_asl allocates only the message it returns (strings of at most 255
+// bytes, at most max_answer_entries entries, payloads of at most n bytes),
+// never reads past `size`, and keeps no state.
 
 #include <cstdint>
 #include <string>
@@ -185,7 +193,8 @@ void encode(const asl_message& x, byte_buffer& out);
 /// from 1). Besides truncation and trailing bytes it refuses bools other
 /// than 0/1, `query_by` above 2, `query_by::any` with a pattern, answers
 /// with more than max_answer_entries entries, responses, reliable requests
-/// and acks with request_id 0, and reliable-request flags other than 0/1. What decodes re-encodes to exactly the same bytes.
+/// and acks with request_id 0, and reliable-request flags other than 0/1.
+/// What decodes re-encodes to exactly the same bytes.
 caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size);
 
 /// The kind of an encoded message, for counters; error on an empty or

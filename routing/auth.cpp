@@ -4,6 +4,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <iterator>
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -14,6 +15,7 @@
 #include <openssl/params.h>
 #include <openssl/rand.h>
 
+#include "channels/le_codec.hpp"
 #include "routing/error.hpp"
 
 namespace herm {
@@ -135,26 +137,35 @@ bool data_needs_auth(const auth_config& cfg, module_id dst, uint8_t protocol,
 
 // -- results ---------------------------------------------------------------------
 
+namespace {
+
+/// Per auth_result, in enum order: its name, and the counter of auth_stats
+/// a verify with that result bumps (challenge_failed is accept_reply's,
+/// never verify's).
+struct result_row {
+  const char* name;
+  uint64_t auth_stats::*verified;
+};
+
+constexpr result_row result_rows[] = {
+  {"ok", &auth_stats::accepted},
+  {"truncated", &auth_stats::truncated},
+  {"wrong_key_id", &auth_stats::wrong_key_id},
+  {"bad_tag", &auth_stats::bad_tag},
+  {"replayed", &auth_stats::replayed},
+  {"table_full", &auth_stats::table_full},
+  {"unknown_index", &auth_stats::unknown_index},
+  {"challenge_failed", nullptr},
+};
+
+static_assert(std::size(result_rows)
+              == static_cast<size_t>(auth_result::challenge_failed) + 1);
+
+} // namespace
+
 const char* to_string(auth_result x) {
-  switch (x) {
-    case auth_result::ok:
-      return "ok";
-    case auth_result::truncated:
-      return "truncated";
-    case auth_result::wrong_key_id:
-      return "wrong_key_id";
-    case auth_result::bad_tag:
-      return "bad_tag";
-    case auth_result::replayed:
-      return "replayed";
-    case auth_result::table_full:
-      return "table_full";
-    case auth_result::unknown_index:
-      return "unknown_index";
-    case auth_result::challenge_failed:
-      return "challenge_failed";
-  }
-  return "?";
+  auto i = static_cast<size_t>(x);
+  return i < std::size(result_rows) ? result_rows[i].name : "?";
 }
 
 // -- authenticator ---------------------------------------------------------------
@@ -228,12 +239,7 @@ bool authenticator::mac(uint8_t link, const uint8_t* data, size_t size,
 }
 
 void authenticator::sign(byte_buffer& packet, uint8_t link) {
-  packet.push_back(cfg_.key_id);
-  for (int i = 0; i < 4; ++i)
-    packet.push_back(static_cast<uint8_t>(index_ >> (8 * i)));
-  auto pc = counter_++;
-  for (int i = 0; i < 8; ++i)
-    packet.push_back(static_cast<uint8_t>(pc >> (8 * i)));
+  le_writer{packet}.u8(cfg_.key_id).u32(index_).u64(counter_++);
   // Without a working HMAC the tag is zeros, which every receiver refuses
   // (verify refuses whatever it cannot compute).
   std::array<uint8_t, 32> tag;
@@ -256,50 +262,25 @@ auth_result authenticator::verify(const uint8_t* data, size_t size,
                                   uint8_t link, time_point now,
                                   auth_trailer& out, size_t min_body) {
   auto count = [&](auth_result r) {
-    switch (r) {
-      case auth_result::ok:
-        ++stats_.accepted;
-        break;
-      case auth_result::truncated:
-        ++stats_.truncated;
-        break;
-      case auth_result::wrong_key_id:
-        ++stats_.wrong_key_id;
-        break;
-      case auth_result::bad_tag:
-        ++stats_.bad_tag;
-        break;
-      case auth_result::replayed:
-        ++stats_.replayed;
-        break;
-      case auth_result::table_full:
-        ++stats_.table_full;
-        break;
-      case auth_result::unknown_index:
-        ++stats_.unknown_index;
-        break;
-      case auth_result::challenge_failed:
-        break; // accept_reply's, never verify's
-    }
+    if (auto counter = result_rows[static_cast<size_t>(r)].verified)
+      ++(stats_.*counter);
     return r;
   };
   auto trailer = cfg_.trailer_size();
   if (data == nullptr || size < trailer || size - trailer < min_body)
     return count(auth_result::truncated);
   auto body = size - trailer;
-  const uint8_t* t = data + body;
-  if (t[0] != cfg_.key_id)
+  // The trailer has a fixed size, checked above: the reads cannot fail.
+  le_reader t{data, size, body};
+  if (t.u8() != cfg_.key_id)
     return count(auth_result::wrong_key_id);
-  uint32_t index = 0;
-  for (int i = 0; i < 4; ++i)
-    index |= uint32_t{t[1 + i]} << (8 * i);
-  uint64_t pc = 0;
-  for (int i = 0; i < 8; ++i)
-    pc |= uint64_t{t[5 + i]} << (8 * i);
+  auto index = t.u32();
+  auto pc = t.u64();
   std::array<uint8_t, 32> want;
   if (!mac(link, data, body + auth_head_size, want))
     return count(auth_result::bad_tag);
-  if (CRYPTO_memcmp(want.data(), t + auth_head_size, cfg_.tag_bytes) != 0)
+  if (CRYPTO_memcmp(want.data(), data + body + auth_head_size, cfg_.tag_bytes)
+      != 0)
     return count(auth_result::bad_tag);
   out.index = index;
   out.counter = pc;

@@ -28,7 +28,14 @@
 // source (default: OpenSSL's RAND_bytes). Not thread-safe: one
 // authenticator per routing agent. Verification never reads out of bounds
 // and never allocates from a length on the wire: the trailer has a fixed
-// size.
+// size (read and written through channels/le_codec.hpp).
+//
+// Bounds per call: sign and verify are O(n) in the packet size (one
+// HMAC-SHA256 pass) plus O(log max_senders) for the table lookup; sign
+// appends trailer_size() bytes to the packet and allocates nothing else.
+// verify allocates at most one table entry, and when the table is full
+// scans it once (O(max_senders)) for the oldest sender to forget; the same
+// holds for challenge (its table) and may_reply (its table).
 
 #include <array>
 #include <chrono>

@@ -4,7 +4,11 @@
 #include <cassert>
 #include <cstdio>
 #include <string>
+#include <tuple>
+#include <type_traits>
+#include <utility>
 
+#include "channels/le_codec.hpp"
 #include "routing/error.hpp"
 
 namespace herm {
@@ -105,85 +109,132 @@ caf::error check_exact(packet_type t, size_t size, size_t expected) {
   return caf::none;
 }
 
-// -- little-endian reading and writing --------------------------------------------
+// -- fixed-size packets -----------------------------------------------------------
 
-/// Appends little-endian integers.
-struct writer {
-  byte_buffer& out;
+// One field of a fixed-size packet: an unsigned integer or a nonce.
 
-  void u8(uint8_t x) {
-    out.push_back(x);
+template <class T>
+void put(le_writer& w, T x) {
+  w.le(x);
+}
+
+void put(le_writer& w, const challenge_nonce& x) {
+  w.bytes(x);
+}
+
+template <class T>
+void get(le_reader& r, T& x) {
+  x = r.le<T>();
+}
+
+void get(le_reader& r, challenge_nonce& x) {
+  r.bytes(x);
+}
+
+template <class T>
+constexpr size_t wire_size = sizeof(T);
+template <>
+constexpr size_t wire_size<challenge_nonce> = challenge_nonce_size;
+
+/// The layout of each fixed-size packet: its type and its fields in wire
+/// order, after the first byte. One table serves encode, decode and size.
+template <class T>
+struct fixed;
+
+template <>
+struct fixed<hello> {
+  static constexpr auto type = packet_type::hello;
+  template <class X>
+  static auto fields(X& x) {
+    return std::tie(x.sender, x.instance, x.seqno, x.interval_ms);
   }
+};
 
-  void u16(uint16_t x) {
-    out.push_back(static_cast<uint8_t>(x));
-    out.push_back(static_cast<uint8_t>(x >> 8));
-  }
-
-  void u32(uint32_t x) {
-    for (int i = 0; i < 4; ++i)
-      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
-  }
-
-  void u64(uint64_t x) {
-    for (int i = 0; i < 8; ++i)
-      out.push_back(static_cast<uint8_t>(x >> (8 * i)));
-  }
-
-  template <size_t N>
-  void raw(const std::array<uint8_t, N>& x) {
-    out.insert(out.end(), x.begin(), x.end());
+template <>
+struct fixed<seqno_request> {
+  static constexpr auto type = packet_type::seqno_request;
+  template <class X>
+  static auto fields(X& x) {
+    return std::tie(x.sender, x.origin, x.seqno, x.hop_count);
   }
 };
 
-/// Reads little-endian integers. Callers check `left()` before reading; the
-/// reads assert it.
-struct reader {
-  const uint8_t* data;
-  size_t size;
-  size_t pos = 0;
-
-  size_t left() const noexcept {
-    return size - pos;
-  }
-
-  uint8_t u8() {
-    assert(left() >= 1);
-    return data[pos++];
-  }
-
-  uint16_t u16() {
-    assert(left() >= 2);
-    auto x = static_cast<uint16_t>(data[pos] | data[pos + 1] << 8);
-    pos += 2;
-    return x;
-  }
-
-  uint32_t u32() {
-    assert(left() >= 4);
-    uint32_t x = 0;
-    for (int i = 0; i < 4; ++i)
-      x |= uint32_t{data[pos + i]} << (8 * i);
-    pos += 4;
-    return x;
-  }
-
-  uint64_t u64() {
-    assert(left() >= 8);
-    uint64_t x = 0;
-    for (int i = 0; i < 8; ++i)
-      x |= uint64_t{data[pos + i]} << (8 * i);
-    pos += 8;
-    return x;
-  }
-
-  template <size_t N>
-  void raw(std::array<uint8_t, N>& x) {
-    assert(left() >= N);
-    std::copy(data + pos, data + pos + N, x.begin());
-    pos += N;
+template <>
+struct fixed<claim> {
+  static constexpr auto type = packet_type::claim;
+  template <class X>
+  static auto fields(X& x) {
+    return std::tie(x.id, x.nonce, x.instance, x.hop_limit);
   }
 };
+
+template <>
+struct fixed<conflict> {
+  static constexpr auto type = packet_type::conflict;
+  template <class X>
+  static auto fields(X& x) {
+    return std::tie(x.id, x.holder_instance, x.claim_nonce, x.loser_instance,
+                    x.hop_limit);
+  }
+};
+
+template <>
+struct fixed<challenge_request> {
+  static constexpr auto type = packet_type::challenge_request;
+  template <class X>
+  static auto fields(X& x) {
+    return std::tie(x.nonce);
+  }
+};
+
+template <>
+struct fixed<challenge_reply> {
+  static constexpr auto type = packet_type::challenge_reply;
+  template <class X>
+  static auto fields(X& x) {
+    return std::tie(x.nonce);
+  }
+};
+
+template <class... Fs>
+constexpr size_t sum_of_sizes(std::tuple<Fs&...>*) {
+  return (size_t{1} + ... + wire_size<std::remove_const_t<Fs>>);
+}
+
+/// Bytes of a fixed-size packet, first byte included.
+template <class T>
+constexpr size_t fixed_size() {
+  using tuple = decltype(fixed<T>::fields(std::declval<T&>()));
+  return sum_of_sizes(static_cast<tuple*>(nullptr));
+}
+
+static_assert(fixed_size<hello>() == hello_size);
+static_assert(fixed_size<seqno_request>() == seqno_request_size);
+static_assert(fixed_size<claim>() == claim_size);
+static_assert(fixed_size<conflict>() == conflict_size);
+static_assert(fixed_size<challenge_request>() == challenge_size);
+static_assert(fixed_size<challenge_reply>() == challenge_size);
+
+template <class T>
+void encode_fixed(const T& x, byte_buffer& out) {
+  le_writer w{out};
+  w.u8(first_byte(fixed<T>::type));
+  std::apply([&w](const auto&... f) { (put(w, f), ...); },
+             fixed<T>::fields(x));
+}
+
+template <class T>
+caf::expected<T> decode_fixed(const uint8_t* data, size_t size) {
+  constexpr auto t = fixed<T>::type;
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (auto err = check_exact(t, size, fixed_size<T>()))
+    return err;
+  le_reader r{data, size, 1};
+  T x;
+  std::apply([&r](auto&... f) { (get(r, f), ...); }, fixed<T>::fields(x));
+  return x;
+}
 
 /// Whether class `k` of `x` can be sent as it is. A class that cannot is
 /// sent as a retraction, which is always safe for loop freedom.
@@ -222,7 +273,7 @@ caf::expected<packet_type> peek_type(const uint8_t* data, size_t size) {
 void encode(const data_header& h, byte_buffer& out) {
   assert(h.size_class < size_classes && h.priority <= 3);
   assert(h.flood_id == 0 || h.dst == broadcast_module);
-  writer w{out};
+  le_writer w{out};
   w.u8(first_byte(packet_type::data));
   w.u16(h.src);
   w.u16(h.dst);
@@ -243,7 +294,7 @@ caf::expected<data_header> decode_data_header(const uint8_t* data,
   if (size < data_header_size)
     return bad(t, "truncated header: " + num(size) + " of "
                     + num(data_header_size) + " bytes");
-  reader r{data, size, 1};
+  le_reader r{data, size, 1};
   data_header h;
   h.src = r.u16();
   h.dst = r.u16();
@@ -279,30 +330,57 @@ void set_authenticated(uint8_t* packet, bool on) {
     packet[data_flags_offset] &= static_cast<uint8_t>(~data_auth_flag);
 }
 
-// -- hello -----------------------------------------------------------------------
+// -- fixed-size packets ------------------------------------------------------------
 
 void encode(const hello& x, byte_buffer& out) {
-  writer w{out};
-  w.u8(first_byte(packet_type::hello));
-  w.u16(x.sender);
-  w.u64(x.instance);
-  w.u16(x.seqno);
-  w.u16(x.interval_ms);
+  encode_fixed(x, out);
 }
 
 caf::expected<hello> decode_hello(const uint8_t* data, size_t size) {
-  constexpr auto t = packet_type::hello;
-  if (auto err = check_head(t, data, size))
-    return err;
-  if (auto err = check_exact(t, size, hello_size))
-    return err;
-  reader r{data, size, 1};
-  hello x;
-  x.sender = r.u16();
-  x.instance = r.u64();
-  x.seqno = r.u16();
-  x.interval_ms = r.u16();
-  return x;
+  return decode_fixed<hello>(data, size);
+}
+
+void encode(const seqno_request& x, byte_buffer& out) {
+  encode_fixed(x, out);
+}
+
+caf::expected<seqno_request> decode_seqno_request(const uint8_t* data,
+                                                  size_t size) {
+  return decode_fixed<seqno_request>(data, size);
+}
+
+void encode(const claim& x, byte_buffer& out) {
+  encode_fixed(x, out);
+}
+
+caf::expected<claim> decode_claim(const uint8_t* data, size_t size) {
+  return decode_fixed<claim>(data, size);
+}
+
+void encode(const conflict& x, byte_buffer& out) {
+  encode_fixed(x, out);
+}
+
+caf::expected<conflict> decode_conflict(const uint8_t* data, size_t size) {
+  return decode_fixed<conflict>(data, size);
+}
+
+void encode(const challenge_request& x, byte_buffer& out) {
+  encode_fixed(x, out);
+}
+
+caf::expected<challenge_request> decode_challenge_request(const uint8_t* data,
+                                                          size_t size) {
+  return decode_fixed<challenge_request>(data, size);
+}
+
+void encode(const challenge_reply& x, byte_buffer& out) {
+  encode_fixed(x, out);
+}
+
+caf::expected<challenge_reply> decode_challenge_reply(const uint8_t* data,
+                                                      size_t size) {
+  return decode_fixed<challenge_reply>(data, size);
 }
 
 // -- update ----------------------------------------------------------------------
@@ -310,7 +388,7 @@ caf::expected<hello> decode_hello(const uint8_t* data, size_t size) {
 void encode(const update& x, byte_buffer& out) {
   assert(x.entries.size() <= max_update_entries);
   auto count = std::min(x.entries.size(), max_update_entries);
-  writer w{out};
+  le_writer w{out};
   w.u8(first_byte(packet_type::update));
   w.u16(x.sender);
   w.u64(x.instance);
@@ -339,7 +417,7 @@ caf::expected<update> decode_update(const uint8_t* data, size_t size) {
   if (size < update_head_size)
     return bad(t, "truncated header: " + num(size) + " of "
                     + num(update_head_size) + " bytes");
-  reader r{data, size, 1};
+  le_reader r{data, size, 1};
   update x;
   x.sender = r.u16();
   x.instance = r.u64();
@@ -389,134 +467,6 @@ caf::expected<update> decode_update(const uint8_t* data, size_t size) {
   if (r.left() != 0)
     return bad(t, num(r.left()) + " trailing bytes");
   return x;
-}
-
-// -- seqno request ---------------------------------------------------------------
-
-void encode(const seqno_request& x, byte_buffer& out) {
-  writer w{out};
-  w.u8(first_byte(packet_type::seqno_request));
-  w.u16(x.sender);
-  w.u16(x.origin);
-  w.u16(x.seqno);
-  w.u8(x.hop_count);
-}
-
-caf::expected<seqno_request> decode_seqno_request(const uint8_t* data,
-                                                  size_t size) {
-  constexpr auto t = packet_type::seqno_request;
-  if (auto err = check_head(t, data, size))
-    return err;
-  if (auto err = check_exact(t, size, seqno_request_size))
-    return err;
-  reader r{data, size, 1};
-  seqno_request x;
-  x.sender = r.u16();
-  x.origin = r.u16();
-  x.seqno = r.u16();
-  x.hop_count = r.u8();
-  return x;
-}
-
-// -- claim -----------------------------------------------------------------------
-
-void encode(const claim& x, byte_buffer& out) {
-  writer w{out};
-  w.u8(first_byte(packet_type::claim));
-  w.u16(x.id);
-  w.u64(x.nonce);
-  w.u64(x.instance);
-  w.u8(x.hop_limit);
-}
-
-caf::expected<claim> decode_claim(const uint8_t* data, size_t size) {
-  constexpr auto t = packet_type::claim;
-  if (auto err = check_head(t, data, size))
-    return err;
-  if (auto err = check_exact(t, size, claim_size))
-    return err;
-  reader r{data, size, 1};
-  claim x;
-  x.id = r.u16();
-  x.nonce = r.u64();
-  x.instance = r.u64();
-  x.hop_limit = r.u8();
-  return x;
-}
-
-// -- conflict --------------------------------------------------------------------
-
-void encode(const conflict& x, byte_buffer& out) {
-  writer w{out};
-  w.u8(first_byte(packet_type::conflict));
-  w.u16(x.id);
-  w.u64(x.holder_instance);
-  w.u64(x.claim_nonce);
-  w.u64(x.loser_instance);
-  w.u8(x.hop_limit);
-}
-
-caf::expected<conflict> decode_conflict(const uint8_t* data, size_t size) {
-  constexpr auto t = packet_type::conflict;
-  if (auto err = check_head(t, data, size))
-    return err;
-  if (auto err = check_exact(t, size, conflict_size))
-    return err;
-  reader r{data, size, 1};
-  conflict x;
-  x.id = r.u16();
-  x.holder_instance = r.u64();
-  x.claim_nonce = r.u64();
-  x.loser_instance = r.u64();
-  x.hop_limit = r.u8();
-  return x;
-}
-
-// -- challenges ------------------------------------------------------------------
-
-namespace {
-
-/// Both challenge packets are the first byte and a nonce.
-template <class T>
-void encode_challenge(packet_type t, const T& x, byte_buffer& out) {
-  writer w{out};
-  w.u8(first_byte(t));
-  w.raw(x.nonce);
-}
-
-template <class T>
-caf::expected<T> decode_challenge(packet_type t, const uint8_t* data,
-                                  size_t size) {
-  if (auto err = check_head(t, data, size))
-    return err;
-  if (auto err = check_exact(t, size, challenge_size))
-    return err;
-  reader r{data, size, 1};
-  T x;
-  r.raw(x.nonce);
-  return x;
-}
-
-} // namespace
-
-void encode(const challenge_request& x, byte_buffer& out) {
-  encode_challenge(packet_type::challenge_request, x, out);
-}
-
-caf::expected<challenge_request> decode_challenge_request(const uint8_t* data,
-                                                          size_t size) {
-  return decode_challenge<challenge_request>(packet_type::challenge_request,
-                                             data, size);
-}
-
-void encode(const challenge_reply& x, byte_buffer& out) {
-  encode_challenge(packet_type::challenge_reply, x, out);
-}
-
-caf::expected<challenge_reply> decode_challenge_reply(const uint8_t* data,
-                                                      size_t size) {
-  return decode_challenge<challenge_reply>(packet_type::challenge_reply, data,
-                                           size);
 }
 
 } // namespace herm

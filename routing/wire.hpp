@@ -5,8 +5,17 @@
 // (bits 7..4, currently 1) and type (bits 3..0). All integers little endian.
 // Decoders are total: any byte string yields a value or ec::invalid_* error,
 // every length and count is checked against the bytes present before
-// anything is allocated, and nothing is read out of bounds. They will be
-// fuzzed.
+// anything is allocated, and nothing is read out of bounds. They are
+// fuzzed (tests/fuzz/fuzz_routing_wire.cpp).
+//
+// Bounds per call (all through channels/le_codec.hpp): time O(n) in the
+// packet size for decoders and in the encoded size for encoders. Encoders
+// allocate nothing but the growth of `out` (an update is at most
+// 12 + max_update_entries * (4 + size_classes * (5 + max_route_hops))
+// bytes); decoders allocate only the value they return (an update's entries
+// and their paths, bounded the same way), and on bad input return the error
+// after reading no further than `size`. They keep no state: any thread may
+// call them on buffers of its own.
 
 #include <array>
 #include <cstdint>
