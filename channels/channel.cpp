@@ -13,6 +13,7 @@
 
 #include "channels/error.hpp"
 #include "channels/type_ids.hpp"
+#include "channels/bundling_port.hpp"
 #include "channels/port.hpp"
 #include "channels/tx_backlog.hpp"
 
@@ -62,19 +63,6 @@ struct channel_state {
   /// do its frames go to the backlog now?
   bool packet_sent_any = false;
   bool packet_in_backlog = false;
-  /// Small packets to one destination waiting to leave together in one
-  /// bundle frame (fragmentation.hpp): filled while more messages wait in
-  /// the mailbox, sent when it runs empty. Only on links with an MTU of at
-  /// least min_bundle_mtu.
-  bool bundling = false;
-  uint32_t mtu = 0;
-  byte_buffer bundle;
-  link_addr bundle_dst = 0;
-  uint8_t bundle_prio = 0;
-  size_t bundle_count = 0;
-  size_t bundle_bytes = 0;
-  /// Bundle frames received that did not decode (whole frame dropped).
-  uint64_t rx_bad_bundles = 0;
 
   /// The frame_writer of this channel's port stack.
   caf::error write_frame(link_addr dst, uint8_t prio, const uint8_t* data,
@@ -95,7 +83,38 @@ struct channel_state {
   }
 };
 
-using channel_impl = channel_actor::stateful_pointer<channel_state>;
+/// The channel actor. Each message is one turn: at its end the port stack
+/// is flushed when no further message waits (bundling_port.hpp), so that
+/// packets written in one burst share frames and no handler has to send
+/// what the stack holds back.
+class channel_self : public channel_actor::stateful_base<channel_state> {
+public:
+  using super = channel_actor::stateful_base<channel_state>;
+
+  using super::super;
+
+  caf::invoke_message_result consume(caf::mailbox_element& x) override {
+    // A write may join the bundle being built: it is flushed after the
+    // write when the mailbox is empty. Any other message sees it flushed
+    // first when it is the last one waiting, so that statistics and
+    // timers account for every packet written before it.
+    bool write = x.content().match_elements<write_packet>();
+    if (!write)
+      end_turn();
+    auto res = super::consume(x);
+    if (write)
+      end_turn();
+    return res;
+  }
+
+private:
+  void end_turn() {
+    if (state.port != nullptr && mailbox().empty())
+      state.port->flush();
+  }
+};
+
+using channel_impl = channel_self*;
 
 void deliver(channel_impl self, link_addr src) {
   auto& st = self->state;
@@ -149,65 +168,62 @@ void flush(channel_impl self) {
   schedule_flush(self);
 }
 
-/// Sends one packet through the port stack, or queues it in the backlog.
-void send_packet(channel_impl self, link_addr dst, uint8_t prio,
-                 const uint8_t* data, size_t size) {
-  auto& st = self->state;
-  if (!st.backlog.empty()) {
-    // Queue the whole packet or none of it; a full backlog makes room by
-    // dropping less urgent packets first (tx_backlog.hpp).
-    auto frames = st.port->frames_for(size);
-    if (!st.backlog.admit(prio, tx_backlog::cost(size, frames))) {
-      ++st.stats.tx_dropped;
-      return;
-    }
+/// The channel's own layer of the port stack, below the bundling port and
+/// above the fragmenting one: per packet (or bundle frame) it applies the
+/// backlog's admission, starts the frame writer's per-packet state, counts
+/// and arms the backlog timer.
+class channel_tx_port : public port_decorator {
+public:
+  channel_tx_port(channel_impl self, std::unique_ptr<packet_port> inner)
+    : port_decorator(std::move(inner)), self_(self) {
+    // nop
   }
-  st.packet_sent_any = false;
-  st.packet_in_backlog = false;
-  auto res = st.port->send(dst, prio, data, size);
-  if (!res) {
-    ++st.stats.tx_dropped;
-    return;
-  }
-  ++st.stats.tx_packets;
-  st.stats.tx_bytes += size;
-  st.stats.tx_frames += *res;
-  schedule_flush(self);
-}
 
-/// Sends the bundle being built: as an ordinary packet when it holds one.
-void flush_bundle(channel_impl self) {
-  auto& st = self->state;
-  if (st.bundle_count == 0)
-    return;
-  if (st.bundle_count == 1) {
-    // Header byte and length field before the packet's bytes.
-    auto* data = st.bundle.data() + st.bundle.size() - st.bundle_bytes;
-    send_packet(self, st.bundle_dst, st.bundle_prio, data, st.bundle_bytes);
-  } else {
+  /// Sends one packet through the port stack, or queues it in the backlog.
+  caf::expected<size_t> send(link_addr dst, uint8_t prio, const uint8_t* data,
+                             size_t size) override {
+    auto& st = self_->state;
+    if (!st.backlog.empty()) {
+      // Queue the whole packet or none of it; a full backlog makes room by
+      // dropping less urgent packets first (tx_backlog.hpp).
+      auto frames = inner_->frames_for(size);
+      if (!st.backlog.admit(prio, tx_backlog::cost(size, frames))) {
+        ++st.stats.tx_dropped;
+        return make_error(ec::queue_full, "the channel's backlog is full");
+      }
+    }
     st.packet_sent_any = false;
     st.packet_in_backlog = false;
-    if (auto err = st.write_frame(st.bundle_dst, st.bundle_prio,
-                                  st.bundle.data(), st.bundle.size())) {
-      st.stats.tx_dropped += st.bundle_count;
-    } else {
-      st.stats.tx_packets += st.bundle_count;
-      st.stats.tx_bytes += st.bundle_bytes;
-      ++st.stats.tx_frames;
-      ++st.stats.tx_bundles;
+    auto res = inner_->send(dst, prio, data, size);
+    if (!res) {
+      ++st.stats.tx_dropped;
+      return res;
     }
-    schedule_flush(self);
+    ++st.stats.tx_packets;
+    st.stats.tx_bytes += size;
+    st.stats.tx_frames += *res;
+    schedule_flush(self_);
+    return res;
   }
-  st.bundle.clear();
-  st.bundle_count = 0;
-  st.bundle_bytes = 0;
-}
 
-/// Flushes the bundle unless more messages wait (one of them flushes it).
-void settle(channel_impl self) {
-  if (self->state.bundle_count > 0 && self->mailbox().empty())
-    flush_bundle(self);
-}
+  /// One prepared frame (a bundle): counted by the port that made it.
+  caf::expected<size_t> send_frame(link_addr dst, uint8_t prio,
+                                   const uint8_t* data, size_t size) override {
+    auto& st = self_->state;
+    st.packet_sent_any = false;
+    st.packet_in_backlog = false;
+    auto res = inner_->send_frame(dst, prio, data, size);
+    schedule_flush(self_);
+    return res;
+  }
+
+  bool congested() const override {
+    return !self_->state.backlog.empty();
+  }
+
+private:
+  channel_impl self_;
+};
 
 void publish(channel_impl self, link_event ev) {
   ev.channel = self->state.info.id;
@@ -236,12 +252,6 @@ channel_actor::behavior_type channel_fun(channel_impl self,
   init.port = std::move(*port);
   init.info.max_packet = init.port->max_packet();
   init.backlog = tx_backlog{backlog_bound(init.driver->profile())};
-  init.mtu = init.driver->profile().mtu;
-  // Bundles are a fragment-header type: only on fragmenting port stacks.
-  init.bundling = init.mtu >= min_bundle_mtu
-                  && init.port->max_packet() > init.mtu;
-  if (init.bundling)
-    init.bundle.reserve(init.mtu);
   {
     // Retry a full driver queue after about 16 frame times, 1 to 20 ms.
     auto& p = init.driver->profile();
@@ -255,7 +265,6 @@ channel_actor::behavior_type channel_fun(channel_impl self,
   // The channel ends with its device.
   self->monitor(setup.device);
   self->set_down_handler([self](caf::down_msg& msg) {
-    settle(self);
     auto& readers = self->state.readers;
     auto i = std::find_if(readers.begin(), readers.end(), [&](auto& r) {
       return r.address() == msg.source;
@@ -272,30 +281,11 @@ channel_actor::behavior_type channel_fun(channel_impl self,
     [self](write_packet& msg) {
       auto& st = self->state;
       auto dst = st.peer == broadcast_addr ? msg.dst : st.peer;
-      if (st.bundling && st.backlog.empty()
-          && bundle_cost(msg.bytes.size()) + 1 < st.mtu / 2) {
-        // A small packet: bundle it with the ones waiting behind it.
-        if (st.bundle_count > 0
-            && (dst != st.bundle_dst || msg.priority != st.bundle_prio))
-          flush_bundle(self);
-        if (!bundle_append(st.bundle, st.mtu, msg.bytes.data(),
-                           msg.bytes.size())) {
-          flush_bundle(self);
-          bundle_append(st.bundle, st.mtu, msg.bytes.data(), msg.bytes.size());
-        }
-        st.bundle_dst = dst;
-        st.bundle_prio = msg.priority;
-        ++st.bundle_count;
-        st.bundle_bytes += msg.bytes.size();
-        if (self->mailbox().empty())
-          flush_bundle(self);
-        return;
-      }
-      flush_bundle(self); // keeps the order of packets
-      send_packet(self, dst, msg.priority, msg.bytes.data(), msg.bytes.size());
+      // Counted, dropped or held for a bundle by the port stack.
+      (void) st.port->send(dst, msg.priority, msg.bytes.data(),
+                           msg.bytes.size());
     },
     [self](atom::subscribe, channel_reader_actor& reader) -> channel_info {
-      settle(self);
       auto& readers = self->state.readers;
       if (std::find(readers.begin(), readers.end(), reader) == readers.end()) {
         self->monitor(reader);
@@ -308,7 +298,6 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       return current_info(self);
     },
     [self](atom::unsubscribe, const channel_reader_actor& reader) {
-      settle(self);
       auto& readers = self->state.readers;
       auto i = std::find(readers.begin(), readers.end(), reader);
       if (i != readers.end()) {
@@ -319,15 +308,13 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       }
     },
     [self](atom::get, atom::info) -> channel_info {
-      settle(self);
       return current_info(self);
     },
     [self](atom::get, atom::stats) -> channel_stats {
-      settle(self);
       auto& st = self->state;
       auto result = st.stats;
       st.port->add_stats(result);
-      result.rx_malformed += st.counters->malformed.load() + st.rx_bad_bundles;
+      result.rx_malformed += st.counters->malformed.load();
       result.rx_kernel_dropped = st.counters->kernel_dropped.load();
       result.rx_queue_dropped = st.rx_queue->dropped();
       auto& bl = st.backlog.stats();
@@ -345,7 +332,6 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       return result;
     },
     [self](atom::get, const std::string& key) -> caf::result<std::string> {
-      settle(self);
       auto res = self->state.driver->get_param(key);
       if (!res)
         return std::move(res.error());
@@ -353,7 +339,6 @@ channel_actor::behavior_type channel_fun(channel_impl self,
     },
     [self](atom::set, const std::string& key,
            const std::string& value) -> caf::result<channel_info> {
-      settle(self);
       if (key == "mtu")
         return make_error(ec::invalid_parameter,
                           "the MTU of channel " + std::to_string(self->state.info.id)
@@ -364,13 +349,14 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       return current_info(self);
     },
     [self](atom::close) {
-      flush_bundle(self);
+      // A closing channel sends what its port stack holds, even with
+      // messages still waiting (they are dropped with the channel).
+      self->state.port->flush();
       self->quit(make_error(ec::channel_closed,
                             "channel " + std::to_string(self->state.info.id)
                               + " closed by its owner"));
     },
     [self](frame_received& msg) {
-      settle(self);
       auto& st = self->state;
       st.rx_queue->release(msg.bytes.size());
       ++st.stats.rx_frames;
@@ -383,25 +369,14 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       } else if (st.peers.count(msg.src) == 0) {
         ++st.stats.rx_peers_unrecorded;
       }
-      if (st.bundling && !msg.bytes.empty()
-          && msg.bytes[0] == bundle_header) {
-        auto ok = bundle_decode(msg.bytes.data(), msg.bytes.size(),
-                                st.info.max_packet,
-                                [&](const uint8_t* data, size_t size) {
-                                  st.rx_buf.assign(data, data + size);
-                                  deliver(self, msg.src);
-                                });
-        if (ok)
-          ++st.stats.rx_bundles;
-        else
-          ++st.rx_bad_bundles;
-        return;
-      }
       auto now = self->clock().now();
       switch (st.port->receive(msg.src, msg.lane, msg.bytes.data(),
                                msg.bytes.size(), now, st.rx_buf)) {
         case packet_port::rx::packet:
-          deliver(self, msg.src);
+          // A bundle frame carries more than one.
+          do
+            deliver(self, msg.src);
+          while (st.port->next_packet(st.rx_buf));
           break;
         case packet_port::rx::pending:
           schedule_tick(self);
@@ -411,11 +386,9 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       }
     },
     [self](link_event& ev) {
-      settle(self);
       publish(self, std::move(ev));
     },
     [self](atom::tick) {
-      settle(self);
       // Both the reassembly timer and the backlog timer send tick; doing
       // both jobs on either is harmless.
       auto& st = self->state;
@@ -439,7 +412,9 @@ channel_actor spawn_channel(caf::actor_system& sys, channel_setup setup) {
     };
     // make_port fails only for MTUs below 8, which the device refuses.
     auto port = make_port(setup.driver, setup.limits, writer);
-    auto ptr = std::move(*port);
+    auto ptr = with_bundling(
+      std::make_unique<channel_tx_port>(self, std::move(*port)),
+      setup.driver->profile().mtu);
     return channel_fun(self, std::move(setup), &ptr);
   });
 }

@@ -28,6 +28,79 @@ uint8_t packet_port::lane(link_addr, uint8_t) const {
   return 0;
 }
 
+void packet_port::flush() {
+  // nop
+}
+
+bool packet_port::congested() const {
+  return false;
+}
+
+bool packet_port::next_packet(byte_buffer&) {
+  return false;
+}
+
+// -- port_decorator ------------------------------------------------------------
+
+port_decorator::port_decorator(std::unique_ptr<packet_port> inner)
+  : inner_(std::move(inner)) {
+  // nop
+}
+
+uint32_t port_decorator::max_packet() const {
+  return inner_->max_packet();
+}
+
+caf::expected<size_t> port_decorator::send(link_addr dst, uint8_t priority,
+                                           const uint8_t* data, size_t size) {
+  return inner_->send(dst, priority, data, size);
+}
+
+packet_port::rx port_decorator::receive(link_addr src, uint8_t lane,
+                                        const uint8_t* data, size_t size,
+                                        time_point now, byte_buffer& out) {
+  return inner_->receive(src, lane, data, size, now, out);
+}
+
+uint8_t port_decorator::lane(link_addr dst, uint8_t priority) const {
+  return inner_->lane(dst, priority);
+}
+
+size_t port_decorator::expire(time_point now) {
+  return inner_->expire(now);
+}
+
+std::optional<packet_port::time_point> port_decorator::next_deadline() const {
+  return inner_->next_deadline();
+}
+
+void port_decorator::add_stats(channel_stats& st) const {
+  inner_->add_stats(st);
+}
+
+size_t port_decorator::frames_for(size_t size) const {
+  return inner_->frames_for(size);
+}
+
+caf::expected<size_t> port_decorator::send_frame(link_addr dst,
+                                                 uint8_t priority,
+                                                 const uint8_t* data,
+                                                 size_t size) {
+  return inner_->send_frame(dst, priority, data, size);
+}
+
+void port_decorator::flush() {
+  inner_->flush();
+}
+
+bool port_decorator::congested() const {
+  return inner_->congested();
+}
+
+bool port_decorator::next_packet(byte_buffer& out) {
+  return inner_->next_packet(out);
+}
+
 // -- frame_port ----------------------------------------------------------------
 
 frame_port::frame_port(link_driver_ptr driver, frame_writer writer)
@@ -45,6 +118,12 @@ caf::expected<size_t> frame_port::send(link_addr dst, uint8_t priority,
     return make_error(ec::packet_too_large,
                       std::to_string(size) + " bytes exceed the MTU of "
                         + std::to_string(driver_->profile().mtu));
+  return send_frame(dst, priority, data, size);
+}
+
+caf::expected<size_t> frame_port::send_frame(link_addr dst, uint8_t priority,
+                                             const uint8_t* data,
+                                             size_t size) {
   if (auto err = writer_ ? writer_(dst, priority, data, size)
                          : driver_->send(dst, data, size, priority))
     return err;
@@ -66,7 +145,7 @@ uint8_t frame_port::lane(link_addr dst, uint8_t priority) const {
 fragmenting_port::fragmenting_port(std::unique_ptr<packet_port> inner,
                                    uint32_t inner_mtu,
                                    reassembly_limits limits)
-  : inner_(std::move(inner)),
+  : port_decorator(std::move(inner)),
     fragmenter_(inner_mtu),
     reassembler_(limits) {
   // nop
@@ -122,10 +201,6 @@ packet_port::rx fragmenting_port::receive(link_addr src, uint8_t lane,
       break;
   }
   return rx::dropped;
-}
-
-uint8_t fragmenting_port::lane(link_addr dst, uint8_t priority) const {
-  return inner_->lane(dst, priority);
 }
 
 size_t fragmenting_port::expire(time_point now) {

@@ -3,8 +3,11 @@
 // Packet ports: how a channel turns packets into frames on its driver and
 // back. `frame_port` sends each packet as one frame; `fragmenting_port` is
 // the paper's decorator: it wraps another port and splits packets larger
-// than the link MTU into fragments (channels/fragmentation.hpp). Plain
-// classes, no actors: the channel actor owns one port stack.
+// than the link MTU into fragments (channels/fragmentation.hpp);
+// `bundling_port` (channels/bundling_port.hpp) packs small packets into
+// one frame. Plain classes, no actors: the channel actor owns one port
+// stack and calls flush() once per turn. Not thread-safe: a stack is used
+// by its channel only.
 
 #include <chrono>
 #include <cstdint>
@@ -14,9 +17,10 @@
 
 #include "caf/error.hpp"
 
-#include "channels/fragmentation.hpp"
+#include "channels/fragmenter.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/messages.hpp"
+#include "channels/reassembler.hpp"
 
 namespace herm {
 
@@ -65,6 +69,69 @@ public:
 
   /// Frames a packet of `size` bytes takes on the link.
   virtual size_t frames_for(size_t size) const;
+
+  /// Puts one prepared frame (at most the link MTU) on the link as it is,
+  /// bypassing the framing of this port and of those it wraps. Returns 1
+  /// or the driver's error.
+  virtual caf::expected<size_t> send_frame(link_addr dst, uint8_t priority,
+                                           const uint8_t* data, size_t size)
+    = 0;
+
+  /// Sends whatever a decorator holds back (bundling_port); nothing by
+  /// default. The channel calls it once per turn.
+  virtual void flush();
+
+  /// True while frames wait above the driver's queue (the channel's
+  /// backlog): a decorator then holds nothing back. False by default.
+  virtual bool congested() const;
+
+  /// After receive() returned rx::packet: moves the next further packet
+  /// the same frame carried (a bundle) into `out`; false when none is left.
+  /// Valid until the next receive(). Nothing by default.
+  virtual bool next_packet(byte_buffer& out);
+};
+
+/// Base of decorators: forwards everything to the wrapped port, so that a
+/// decorator overrides only what it changes.
+class port_decorator : public packet_port {
+public:
+  explicit port_decorator(std::unique_ptr<packet_port> inner);
+
+  uint32_t max_packet() const override;
+
+  caf::expected<size_t> send(link_addr dst, uint8_t priority,
+                             const uint8_t* data, size_t size) override;
+
+  using packet_port::receive;
+
+  rx receive(link_addr src, uint8_t lane, const uint8_t* data, size_t size,
+             time_point now, byte_buffer& out) override;
+
+  uint8_t lane(link_addr dst, uint8_t priority) const override;
+
+  size_t expire(time_point now) override;
+
+  std::optional<time_point> next_deadline() const override;
+
+  void add_stats(channel_stats& st) const override;
+
+  size_t frames_for(size_t size) const override;
+
+  caf::expected<size_t> send_frame(link_addr dst, uint8_t priority,
+                                   const uint8_t* data, size_t size) override;
+
+  void flush() override;
+
+  bool congested() const override;
+
+  bool next_packet(byte_buffer& out) override;
+
+  packet_port& inner() noexcept {
+    return *inner_;
+  }
+
+protected:
+  std::unique_ptr<packet_port> inner_;
 };
 
 /// Puts one frame on the link. The channel supplies it, so that it can
@@ -90,6 +157,9 @@ public:
 
   uint8_t lane(link_addr dst, uint8_t priority) const override;
 
+  caf::expected<size_t> send_frame(link_addr dst, uint8_t priority,
+                                   const uint8_t* data, size_t size) override;
+
 private:
   link_driver_ptr driver_;
   frame_writer writer_;
@@ -99,7 +169,7 @@ private:
 /// One packet tag sequence per (destination, lane) and one reassembly per
 /// (source, lane): packets in different lanes may interleave on the link
 /// (CAN: control frames overtake bulk frames) whatever their tags.
-class fragmenting_port : public packet_port {
+class fragmenting_port : public port_decorator {
 public:
   fragmenting_port(std::unique_ptr<packet_port> inner, uint32_t inner_mtu,
                    reassembly_limits limits);
@@ -113,8 +183,6 @@ public:
 
   rx receive(link_addr src, uint8_t lane, const uint8_t* data, size_t size,
              time_point now, byte_buffer& out) override;
-
-  uint8_t lane(link_addr dst, uint8_t priority) const override;
 
   size_t expire(time_point now) override;
 
@@ -131,7 +199,6 @@ public:
   }
 
 private:
-  std::unique_ptr<packet_port> inner_;
   fragmenter fragmenter_;
   reassembler reassembler_;
   byte_buffer frame_;

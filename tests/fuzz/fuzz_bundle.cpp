@@ -10,7 +10,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "channels/fragmentation.hpp"
+#include "channels/bundle_codec.hpp"
 #include "tests/fuzz/fuzz_support.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

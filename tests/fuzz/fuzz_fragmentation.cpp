@@ -56,7 +56,8 @@
 #include <deque>
 #include <vector>
 
-#include "channels/fragmentation.hpp"
+#include "channels/fragmenter.hpp"
+#include "channels/reassembler.hpp"
 #include "tests/fuzz/fuzz_support.hpp"
 
 using namespace herm;

@@ -1,208 +1,24 @@
-#include "channels/fragmentation.hpp"
+#include "channels/reassembler.hpp"
 
 #include <algorithm>
-#include <string_view>
-#include <unordered_map>
 #include <array>
 #include <cassert>
 #include <cstring>
+#include <map>
+#include <string_view>
+#include <unordered_map>
 #include <vector>
 
-#include <zlib.h>
+#include "channels/fragment_wire.hpp"
+#include "channels/le_codec.hpp"
 
 namespace herm {
 
+using namespace fragment_wire;
+
 namespace {
-
-// -- wire format -----------------------------------------------------------------
-
-constexpr uint8_t type_single = 0;
-constexpr uint8_t type_first = 1;
-constexpr uint8_t type_narrow = 2;
-constexpr uint8_t type_wide = 3;
-
-/// Bit 3 of a first fragment's header: the packet uses wide sequence numbers.
-constexpr uint8_t first_wide_flag = 0x08;
-
-constexpr uint32_t crc_size = 4;
-
-/// A length field longer than this is malformed, which caps what can be
-/// fragmented at 2^21 - 1 bytes.
-constexpr size_t max_length_field = 3;
-constexpr size_t max_announced_length = (size_t{1} << (7 * max_length_field)) - 1;
-
-constexpr uint32_t narrow_modulus = 16;
-constexpr uint32_t wide_modulus = 4096;
-
-constexpr uint8_t header(uint8_t type, uint8_t tag) {
-  return static_cast<uint8_t>(type << 6 | (tag & 0x03) << 4);
-}
-
-size_t length_field_size(size_t length) {
-  return length < 0x80 ? 1 : length < 0x4000 ? 2 : 3;
-}
-
-/// Writes `length` as minimal unsigned LEB128 and returns the bytes written.
-/// @pre length <= max_announced_length
-size_t encode_length(size_t length, uint8_t* out) {
-  size_t n = 0;
-  do {
-    auto byte = static_cast<uint8_t>(length & 0x7f);
-    length >>= 7;
-    out[n++] = length != 0 ? static_cast<uint8_t>(byte | 0x80) : byte;
-  } while (length != 0);
-  return n;
-}
-
-struct length_field {
-  size_t value;
-  size_t size;
-};
-
-/// Reads an LEB128 length of at most three bytes from `[data, data + size)`.
-/// Non-minimal encodings (0x81 0x00 for 1) are accepted: the value is still
-/// unambiguous. Fails when the field runs past the frame or past three bytes.
-std::optional<length_field> decode_length(const uint8_t* data, size_t size) {
-  size_t value = 0;
-  for (size_t i = 0; i < max_length_field && i < size; ++i) {
-    value |= size_t{static_cast<uint8_t>(data[i] & 0x7f)} << (7 * i);
-    if ((data[i] & 0x80) == 0)
-      return length_field{value, i + 1};
-  }
-  return std::nullopt;
-}
-
-uint32_t crc_of(const uint8_t* data, size_t size) {
-  // size <= max_announced_length, so the narrowing to uInt is exact.
-  return static_cast<uint32_t>(
-    crc32(0L, size == 0 ? Z_NULL : data, static_cast<uInt>(size)));
-}
-
-void store_le32(uint32_t x, uint8_t* out) {
-  for (int i = 0; i < 4; ++i)
-    out[i] = static_cast<uint8_t>(x >> (8 * i));
-}
-
-uint32_t load_le32(const uint8_t* in) {
-  return uint32_t{in[0]} | uint32_t{in[1]} << 8 | uint32_t{in[2]} << 16
-         | uint32_t{in[3]} << 24;
-}
-
-/// How a fragmented packet is cut: the first frame carries `first_data`
-/// stream bytes after its header and length field, every other frame
-/// `chunk` bytes after its sequence header, the last one what remains.
-struct cut {
-  size_t first_data;
-  size_t chunk;
-  bool wide;
-};
-
-cut cut_for(uint32_t mtu, size_t size) {
-  bool wide = mtu >= wide_fragment_mtu;
-  return {mtu - 1 - length_field_size(size), mtu - (wide ? 2u : 1u), wide};
-}
-
-} // namespace
-
-// -- fragmenter ------------------------------------------------------------------
-
-fragmenter::fragmenter(uint32_t mtu) : mtu_(std::max(mtu, min_fragment_mtu)) {
-  // Below the minimum the first frame could not carry its header, length
-  // and a byte of data; release builds clamp instead of misbehaving.
-  assert(mtu >= min_fragment_mtu);
-}
-
-size_t fragmenter::frames_for(size_t size) const noexcept {
-  if (size < mtu_)
-    return 1;
-  if (size > max_announced_length)
-    return 0; // the length field cannot announce it: split emits nothing
-  auto c = cut_for(mtu_, size);
-  auto rest = size + crc_size - c.first_data;
-  return 1 + (rest + c.chunk - 1) / c.chunk;
-}
-
-void fragmenter::split(link_addr dst, uint8_t lane, const uint8_t* data,
-                       size_t size,
-                       const std::function<void(const uint8_t*, size_t)>& emit) {
-  auto key = std::pair{dst, lane};
-  if (tags_.size() >= max_sequences && tags_.count(key) == 0)
-    tags_.clear();
-  auto& tag = tags_[key];
-  next_tag_ = tag;
-  split(data, size, emit);
-  tag = next_tag_;
-}
-
-void fragmenter::split(link_addr dst, const uint8_t* data, size_t size,
-                       const std::function<void(const uint8_t*, size_t)>& emit) {
-  split(dst, 0, data, size, emit);
-}
-
-void fragmenter::split(const uint8_t* data, size_t size,
-                       const std::function<void(const uint8_t*, size_t)>& emit) {
-  auto tag = next_tag_;
-  if (size < mtu_) {
-    if (scratch_.size() < size + 1)
-      scratch_.resize(size + 1);
-    next_tag_ = (next_tag_ + 1) & 0x03;
-    scratch_[0] = header(type_single, tag);
-    if (size > 0)
-      std::memcpy(scratch_.data() + 1, data, size);
-    emit(scratch_.data(), size + 1);
-    return;
-  }
-  if (size > max_announced_length)
-    return;
-  next_tag_ = (next_tag_ + 1) & 0x03;
-  if (scratch_.size() < mtu_)
-    scratch_.resize(mtu_);
-  uint8_t crc[crc_size];
-  store_le32(crc_of(data, size), crc);
-  // Copies stream bytes [offset, offset + n) of payload || crc to `out`.
-  auto copy_stream = [&](size_t offset, size_t n, uint8_t* out) {
-    if (offset < size) {
-      auto from_payload = std::min(n, size - offset);
-      std::memcpy(out, data + offset, from_payload);
-      out += from_payload;
-      n -= from_payload;
-      offset += from_payload;
-    }
-    // Only when CRC bytes are due: with n == 0 the offset may still lie in
-    // the payload, and crc + (offset - size) would point far outside.
-    if (n > 0)
-      std::memcpy(out, crc + (offset - size), n);
-  };
-  auto c = cut_for(mtu_, size);
-  auto stream = size + crc_size;
-  auto* frame = scratch_.data();
-  frame[0] = static_cast<uint8_t>(header(type_first, tag)
-                                  | (c.wide ? first_wide_flag : 0));
-  auto len = encode_length(size, frame + 1);
-  copy_stream(0, c.first_data, frame + 1 + len);
-  emit(frame, mtu_);
-  size_t index = 1;
-  for (size_t offset = c.first_data; offset < stream; offset += c.chunk) {
-    auto n = std::min(c.chunk, stream - offset);
-    size_t hdr;
-    if (c.wide) {
-      auto seq = index % wide_modulus;
-      frame[0] = static_cast<uint8_t>(header(type_wide, tag) | seq >> 8);
-      frame[1] = static_cast<uint8_t>(seq & 0xff);
-      hdr = 2;
-    } else {
-      frame[0] = static_cast<uint8_t>(header(type_narrow, tag) | index % narrow_modulus);
-      hdr = 1;
-    }
-    copy_stream(offset, n, frame + hdr);
-    emit(frame, hdr + n);
-    ++index;
-  }
-}
 
 // -- reassembler state -----------------------------------------------------------
-
-namespace {
 
 using time_point = reassembler::time_point;
 
@@ -463,7 +279,7 @@ struct reassembler::impl {
   result finish(lane_iter i, uint8_t tag, byte_buffer& out) {
     auto& p = *i->second.packets[tag];
     auto r = result::dropped;
-    if (crc_of(p.buf.data(), p.length) == load_le32(p.buf.data() + p.length)) {
+    if (crc_of(p.buf.data(), p.length) == load_le<uint32_t>(p.buf.data() + p.length)) {
       p.buf.resize(p.length);
       out.swap(p.buf);
       ++stats.packets;
@@ -586,7 +402,7 @@ struct reassembler::impl {
                   time_point now, byte_buffer& out) {
     if ((data[0] & 0x07) != 0)
       return malformed();
-    auto tag = static_cast<uint8_t>(data[0] >> 4 & 0x03);
+    auto tag = tag_of(data[0]);
     bool wide = (data[0] & first_wide_flag) != 0;
     auto len = decode_length(data + 1, size - 1);
     if (!len || len->value > limits.max_packet)
@@ -615,7 +431,7 @@ struct reassembler::impl {
       // The whole stream fits the first frame: nothing to hold.
       if (i != lanes.end())
         release_if_empty(i);
-      if (crc_of(body, len->value) != load_le32(body + len->value)) {
+      if (crc_of(body, len->value) != load_le<uint32_t>(body + len->value)) {
         ++stats.bad_checksum;
         return result::dropped;
       }
@@ -693,13 +509,10 @@ struct reassembler::impl {
 
   result on_consecutive(lane_key key, const uint8_t* data, size_t size,
                         time_point now, byte_buffer& out) {
-    bool wide = data[0] >> 6 == type_wide;
-    size_t hdr = wide ? 2 : 1;
-    if (size <= hdr)
+    auto h = decode_consecutive(data, size);
+    if (!h)
       return malformed();
-    auto tag = static_cast<uint8_t>(data[0] >> 4 & 0x03);
-    auto seq = static_cast<uint16_t>(wide ? (data[0] & 0x0f) << 8 | data[1]
-                                          : data[0] & 0x0f);
+    auto [tag, wide, seq, hdr] = *h;
     auto* body = data + hdr;
     auto n = size - hdr;
     auto i = lanes.find(key);
@@ -768,8 +581,8 @@ struct reassembler::impl {
               byte_buffer& out) {
     if (size == 0 || data == nullptr)
       return malformed();
-    auto tag = static_cast<uint8_t>(data[0] >> 4 & 0x03);
-    if (data[0] >> 6 == type_single) {
+    auto tag = tag_of(data[0]);
+    if (type_of(data[0]) == type_single) {
       if (auto* hist = find_history(key))
         hist->started(tag);
       return on_single(data, size, out);
@@ -792,7 +605,7 @@ struct reassembler::impl {
         return result::dropped;
       }
     }
-    bool first = data[0] >> 6 == type_first;
+    bool first = type_of(data[0]) == type_first;
     auto res = first ? on_first(key, data, size, now, out)
                      : on_consecutive(key, data, size, now, out);
     // Remember only frames that were taken: refusing allocates nothing.
@@ -817,15 +630,7 @@ struct reassembler::impl {
   /// The hash push() computes for the frame a stash entry came from.
   static size_t frame_hash(uint8_t tag, const stash_entry& e) {
     uint8_t hdr[2];
-    size_t n;
-    if (e.wide) {
-      hdr[0] = static_cast<uint8_t>(type_wide << 6 | tag << 4 | (e.seq >> 8 & 0x0F));
-      hdr[1] = static_cast<uint8_t>(e.seq & 0xFF);
-      n = 2;
-    } else {
-      hdr[0] = static_cast<uint8_t>(2 << 6 | tag << 4 | (e.seq & 0x0F));
-      n = 1;
-    }
+    auto n = encode_consecutive(tag, e.wide, e.seq, hdr);
     std::string frame(reinterpret_cast<const char*>(hdr), n);
     frame.append(reinterpret_cast<const char*>(e.bytes.data()), e.bytes.size());
     return std::hash<std::string_view>{}(frame);
@@ -992,72 +797,6 @@ const reassembly_stats& reassembler::stats() const noexcept {
 
 const reassembly_limits& reassembler::limits() const noexcept {
   return impl_->limits;
-}
-
-// -- bundles -------------------------------------------------------------------
-
-size_t bundle_cost(size_t size) noexcept {
-  size_t n = 1;
-  for (auto x = size >> 7; x != 0; x >>= 7)
-    ++n;
-  return n + size;
-}
-
-bool bundle_append(byte_buffer& frame, uint32_t mtu, const uint8_t* data,
-                   size_t size) {
-  if (size == 0 || size > max_announced_length)
-    return false;
-  auto need = bundle_cost(size) + (frame.empty() ? 1 : 0);
-  if (frame.size() + need > mtu)
-    return false;
-  if (frame.empty())
-    frame.push_back(bundle_header);
-  auto x = size;
-  while (x >= 0x80) {
-    frame.push_back(static_cast<uint8_t>(x | 0x80));
-    x >>= 7;
-  }
-  frame.push_back(static_cast<uint8_t>(x));
-  frame.insert(frame.end(), data, data + size);
-  return true;
-}
-
-namespace {
-
-/// One bundle entry's length; nullopt when truncated, too long or not
-/// minimal.
-std::optional<std::pair<size_t, size_t>> bundle_length(const uint8_t* data,
-                                                       size_t size) {
-  auto len = decode_length(data, size);
-  if (!len || (len->size > 1 && data[len->size - 1] == 0))
-    return std::nullopt;
-  return std::pair{static_cast<size_t>(len->value), len->size};
-}
-
-} // namespace
-
-bool bundle_decode(const uint8_t* data, size_t size, size_t max_packet,
-                   const std::function<void(const uint8_t*, size_t)>& emit) {
-  if (size == 0 || data[0] != bundle_header)
-    return false;
-  // First pass: check everything, so that a bad bundle delivers nothing.
-  size_t count = 0;
-  for (size_t pos = 1; pos < size;) {
-    auto len = bundle_length(data + pos, size - pos);
-    if (!len || len->first == 0 || len->first > max_packet
-        || len->first > size - pos - len->second)
-      return false;
-    pos += len->second + len->first;
-    ++count;
-  }
-  if (count < 2)
-    return false;
-  for (size_t pos = 1; pos < size;) {
-    auto len = bundle_length(data + pos, size - pos);
-    emit(data + pos + len->second, len->first);
-    pos += len->second + len->first;
-  }
-  return true;
 }
 
 } // namespace herm
