@@ -18,6 +18,7 @@
 #include "caf/uniform_type_info_map.hpp"
 
 #include "actors/runtime/error.hpp"
+#include "channels/le_codec.hpp"
 
 namespace herm {
 
@@ -27,21 +28,6 @@ namespace {
 
 /// Longest type name on the wire, in bytes.
 constexpr size_t max_type_name = 255;
-
-void write_leb128(byte_buffer& out, uint64_t x) {
-  while (x >= 0x80) {
-    out.push_back(static_cast<uint8_t>((x & 0x7f) | 0x80));
-    x >>= 7;
-  }
-  out.push_back(static_cast<uint8_t>(x));
-}
-
-template <class T>
-void write_le(byte_buffer& out, T x) {
-  static_assert(std::is_unsigned<T>::value, "write_le needs an unsigned type");
-  for (size_t i = 0; i < sizeof(T); ++i)
-    out.push_back(static_cast<uint8_t>(x >> (8 * i)));
-}
 
 bool is_no_context(const caf::error& err) {
   return err.category() == caf::atom("system")
@@ -77,7 +63,7 @@ public:
   }
 
   caf::error begin_sequence(size_t& n) override {
-    write_leb128(out_, n);
+    out_.leb128(n);
     return caf::none;
   }
 
@@ -86,8 +72,7 @@ public:
   }
 
   caf::error apply_raw(size_t n, void* data) override {
-    auto first = static_cast<const uint8_t*>(data);
-    out_.insert(out_.end(), first, first + n);
+    out_.bytes(data, n);
     return caf::none;
   }
 
@@ -136,29 +121,28 @@ protected:
   }
 
   caf::error apply_impl(std::string& x) override {
-    write_leb128(out_, x.size());
-    out_.insert(out_.end(), x.begin(), x.end());
+    out_.leb128(x.size()).bytes(x.data(), x.size());
     return caf::none;
   }
 
   caf::error apply_impl(std::u16string& x) override {
-    write_leb128(out_, x.size() * 2);
+    out_.leb128(x.size() * 2);
     for (auto c : x)
-      write_le(out_, static_cast<uint16_t>(c));
+      out_.u16(static_cast<uint16_t>(c));
     return caf::none;
   }
 
   caf::error apply_impl(std::u32string& x) override {
-    write_leb128(out_, x.size() * 4);
+    out_.leb128(x.size() * 4);
     for (auto c : x)
-      write_le(out_, static_cast<uint32_t>(c));
+      out_.u32(static_cast<uint32_t>(c));
     return caf::none;
   }
 
 private:
   template <class T>
   caf::error put(T x) {
-    write_le(out_, x);
+    out_.le(x);
     return caf::none;
   }
 
@@ -167,7 +151,7 @@ private:
     return make_error(ec::invalid_parameter, reason_);
   }
 
-  byte_buffer& out_;
+  le_writer out_;
   std::string reason_;
 };
 
@@ -179,12 +163,9 @@ private:
 /// after begin_sequence). No execution unit, so actor handles are refused.
 class apo_deserializer final : public caf::deserializer {
 public:
-  apo_deserializer(const uint8_t* begin, const uint8_t* pos, const uint8_t* end,
-                   const unmarshal_limits& limits)
+  apo_deserializer(le_reader in, const unmarshal_limits& limits)
     : caf::deserializer(static_cast<caf::execution_unit*>(nullptr)),
-      begin_(begin),
-      pos_(pos),
-      end_(end),
+      in_(in),
       limits_(limits) {
     // nop
   }
@@ -194,11 +175,11 @@ public:
   }
 
   size_t remaining() const {
-    return static_cast<size_t>(end_ - pos_);
+    return in_.left();
   }
 
   size_t offset() const {
-    return static_cast<size_t>(pos_ - begin_);
+    return in_.pos();
   }
 
   /// Starts counting values anew for the next top-level element.
@@ -210,25 +191,19 @@ public:
 
   /// Reads a LEB128 length or count (minimal form, at most 64 bits).
   caf::error read_leb128(uint64_t& x) {
-    uint64_t result = 0;
-    auto start = offset();
-    for (unsigned i = 0; i < 10; ++i) {
-      if (pos_ == end_)
-        return fail("truncated in a length at offset " + std::to_string(start));
-      auto b = *pos_++;
-      if (i == 9 && b > 1)
-        return fail("length at offset " + std::to_string(start)
-                    + " exceeds 64 bits");
-      result |= static_cast<uint64_t>(b & 0x7f) << (7 * i);
-      if ((b & 0x80) == 0) {
-        if (b == 0 && i > 0)
-          return fail("length at offset " + std::to_string(start)
-                      + " is not in minimal LEB128 form");
-        x = result;
+    auto start = std::to_string(offset());
+    switch (in_.leb128(x)) {
+      case leb128_status::ok:
         return caf::none;
-      }
+      case leb128_status::truncated:
+        return fail("truncated in a length at offset " + start);
+      case leb128_status::too_long: // 10 bytes: only above 64 bits
+        return fail("length at offset " + start + " exceeds 64 bits");
+      case leb128_status::not_minimal:
+        break;
     }
-    return fail("length at offset " + std::to_string(start) + " too long");
+    return fail("length at offset " + start
+                + " is not in minimal LEB128 form");
   }
 
   /// Reads a string of `n` bytes after checking both bounds.
@@ -241,8 +216,7 @@ public:
                   + " bytes exceeds the limit of " + std::to_string(max));
     if (n > remaining())
       return truncated(n);
-    x.assign(reinterpret_cast<const char*>(pos_), static_cast<size_t>(n));
-    pos_ += n;
+    in_.str(static_cast<size_t>(n), x);
     return caf::none;
   }
 
@@ -289,8 +263,7 @@ public:
   caf::error apply_raw(size_t n, void* data) override {
     if (n > remaining())
       return truncated(n);
-    std::memcpy(data, pos_, n);
-    pos_ += n;
+    std::memcpy(data, in_.bytes(n), n);
     return caf::none;
   }
 
@@ -359,8 +332,7 @@ protected:
     x.reserve(raw.size() / 2);
     for (size_t i = 0; i < raw.size(); i += 2)
       x.push_back(static_cast<char16_t>(
-        static_cast<uint8_t>(raw[i])
-        | (static_cast<uint16_t>(static_cast<uint8_t>(raw[i + 1])) << 8)));
+        load_le<uint16_t>(reinterpret_cast<const uint8_t*>(raw.data() + i))));
     return caf::none;
   }
 
@@ -374,12 +346,9 @@ protected:
                   + ": UTF-32 string whose byte length is not a multiple of 4");
     x.clear();
     x.reserve(raw.size() / 4);
-    for (size_t i = 0; i < raw.size(); i += 4) {
-      uint32_t c = 0;
-      for (size_t k = 0; k < 4; ++k)
-        c |= static_cast<uint32_t>(static_cast<uint8_t>(raw[i + k])) << (8 * k);
-      x.push_back(static_cast<char32_t>(c));
-    }
+    for (size_t i = 0; i < raw.size(); i += 4)
+      x.push_back(static_cast<char32_t>(
+        load_le<uint32_t>(reinterpret_cast<const uint8_t*>(raw.data() + i))));
     return caf::none;
   }
 
@@ -396,11 +365,7 @@ private:
     ++values_;
     if (sizeof(T) > remaining())
       return truncated(sizeof(T));
-    T result = 0;
-    for (size_t i = 0; i < sizeof(T); ++i)
-      result = static_cast<T>(result | (static_cast<T>(pos_[i]) << (8 * i)));
-    pos_ += sizeof(T);
-    x = result;
+    x = in_.le<T>();
     return caf::none;
   }
 
@@ -414,9 +379,7 @@ private:
     return caf::none;
   }
 
-  const uint8_t* begin_;
-  const uint8_t* pos_;
-  const uint8_t* end_;
+  le_reader in_;
   const unmarshal_limits& limits_;
   size_t values_ = 0;
   size_t depth_ = 0;
@@ -447,8 +410,8 @@ namespace {
 /// Appends the encoding of `msg` to `out`.
 caf::error marshal_to(caf::actor_system& sys, const caf::message& msg,
                       byte_buffer& out) {
-  out.push_back(apo_format_version);
-  write_leb128(out, msg.size());
+  le_writer w{out};
+  w.u8(apo_format_version).leb128(msg.size());
   apo_serializer sink{out};
   auto& types = sys.types();
   for (size_t i = 0; i < msg.size(); ++i) {
@@ -461,8 +424,7 @@ caf::error marshal_to(caf::actor_system& sys, const caf::message& msg,
                           + (rtti.second != nullptr ? rtti.second->name()
                                                     : "?")
                           + "' has no portable name in the actor system");
-    write_leb128(out, name.size());
-    out.insert(out.end(), name.begin(), name.end());
+    w.leb128(name.size()).bytes(name.data(), name.size());
     if (auto err = msg.save(i, sink))
       return element_error(i, name, sink.reason(), err);
   }
@@ -495,7 +457,7 @@ caf::expected<caf::message> unmarshal(caf::actor_system& sys,
                       "unsupported APO format version "
                         + std::to_string(data[0]) + " (this peer speaks "
                         + std::to_string(apo_format_version) + ")");
-  apo_deserializer source{data, data + 1, data + size, limits};
+  apo_deserializer source{le_reader{data, size, 1}, limits};
   uint64_t count = 0;
   if (auto err = source.read_leb128(count))
     return make_error(ec::invalid_parameter,

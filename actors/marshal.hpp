@@ -8,7 +8,15 @@
 // `inspect` overload and an entry in actors/runtime/type_ids.hpp. The codec
 // walks values with CAF's inspection API and writes HERM's own encoding
 // (fixed-width little-endian integers, LEB128 lengths), so the bytes do not
-// depend on the host's byte order, word size or compiler.
+// depend on the host's byte order, word size or compiler. The bytes are
+// read and written through channels/le_codec.hpp.
+//
+// Bounds per call: marshal is O(n) in the encoded size n and allocates the
+// result (plus what CAF's inspection of the values allocates). unmarshal
+// is O(n) in `size`: one decoding pass and one re-encoding pass (the
+// canonical-form check); it allocates the decoded values, each bounded by
+// `limits` and by the bytes present, plus one per-thread buffer of n bytes
+// for the re-encoding (kept, at most 64 KiB of capacity, for the next call).
 
 #include <cstddef>
 #include <cstdint>
