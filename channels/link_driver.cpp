@@ -1,5 +1,8 @@
 #include "channels/link_driver.hpp"
 
+#include <deque>
+#include <mutex>
+
 #include "channels/error.hpp"
 #include "channels/options.hpp"
 
@@ -44,17 +47,53 @@ caf::expected<std::string> link_driver::get_param(const std::string& key) const 
   return make_error(ec::invalid_parameter, "unknown parameter '" + key + "'");
 }
 
-const std::vector<const link_kind*>& link_kinds() {
-  static const std::vector<const link_kind*> kinds{
+namespace {
+
+/// Every known kind. A deque keeps the added entries where they are, so the
+/// pointers find_link_kind hands out stay valid while others are added.
+struct kind_registry {
+  std::mutex mtx;
+  std::vector<const link_kind*> kinds{
 #define HERM_LINK_KIND(x) &x##_link_kind(),
 #include "channels/link_kinds.def"
 #undef HERM_LINK_KIND
   };
-  return kinds;
+  std::deque<link_kind> added;
+
+  static kind_registry& get() {
+    static kind_registry instance;
+    return instance;
+  }
+};
+
+} // namespace
+
+caf::error add_link_kind(const link_kind& kind) {
+  if (kind.name == nullptr || kind.open == nullptr)
+    return make_error(ec::invalid_parameter,
+                      "a link kind needs a name and an open function");
+  auto& reg = kind_registry::get();
+  std::lock_guard<std::mutex> guard{reg.mtx};
+  for (auto* k : reg.kinds)
+    if (std::string{k->name} == kind.name)
+      return make_error(ec::already_exists,
+                        std::string{"link kind '"} + kind.name
+                          + "' is already known");
+  reg.added.push_back(kind);
+  reg.kinds.push_back(&reg.added.back());
+  return caf::none;
+}
+
+std::vector<const link_kind*> link_kinds() {
+  auto& reg = kind_registry::get();
+  std::lock_guard<std::mutex> guard{reg.mtx};
+  return reg.kinds;
 }
 
 const link_kind* find_link_kind(const std::string& name) {
-  for (auto* k : link_kinds())
+  auto& reg = kind_registry::get();
+  std::lock_guard<std::mutex> guard{reg.mtx};
+  for (auto* k : reg.kinds)
     if (name == k->name)
       return k;
   return nullptr;

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "caf/error.hpp"
 #include "caf/expected.hpp"
@@ -119,8 +120,9 @@ public:
 using link_driver_ptr = std::shared_ptr<link_driver>;
 
 /// A link kind: the factory that opens drivers for devices of that kind (the
-/// paper's abstract factory). Each kind lives in one file under
-/// channels/drivers/ and is registered by one line in link_kinds.def.
+/// paper's abstract factory). The library's own kinds live in one file each
+/// under channels/drivers/ and are listed by one line in link_kinds.def; a
+/// program (or a test) adds kinds of its own with add_link_kind.
 struct link_kind {
   /// Name used in device_config::kind, e.g. "udp".
   const char* name;
@@ -130,10 +132,22 @@ struct link_kind {
   caf::expected<link_driver_ptr> (*open)(const device_config& cfg);
 };
 
-/// Returns the link kind with that name, or nullptr.
+/// Makes `kind` known to find_link_kind and link_kinds, for devices of a kind
+/// the library does not compile in (docs/architecture.md, "Adding a link
+/// kind"). The entry is copied; `name` and `description` must outlive the
+/// program's use of it (string literals do). Thread-safe; call it before any
+/// device of that kind is added (from main, or from a namespace-scope
+/// initializer of a file the program links). Errors: ec::invalid_parameter
+/// for a null name or open, ec::already_exists when a kind of that name is
+/// known (built in or added before); the known kind stays.
+caf::error add_link_kind(const link_kind& kind);
+
+/// Returns the link kind with that name, or nullptr. The pointer stays valid
+/// for the life of the program. Thread-safe; O(number of kinds).
 const link_kind* find_link_kind(const std::string& name);
 
-/// Every compiled-in link kind.
-const std::vector<const link_kind*>& link_kinds();
+/// Every known link kind: the compiled-in ones in link_kinds.def order, then
+/// the added ones in the order they were added. Thread-safe.
+std::vector<const link_kind*> link_kinds();
 
 } // namespace herm
