@@ -215,11 +215,12 @@ struct routing_stats {
   uint64_t rx_routes_over_share = 0;
   uint64_t rx_neighbours_over_limit = 0;
   uint64_t seqno_requests_over_limit = 0;
-  /// Remembered ids forgotten early to stay within their bound, oldest
-  /// first: flooded control packets (claims, conflicts, seqno requests;
-  /// floods_evicted: a duplicate may then be relayed once more), flooded
-  /// broadcasts (flood_ids_evicted: likewise), feasibility distances of
-  /// origins without a route (sources_evicted).
+  /// Remembered ids forgotten early to stay within their bound: of the
+  /// flood cache (routing_config::max_floods, soonest to expire first),
+  /// flooded control packets (claims, conflicts, seqno requests;
+  /// floods_evicted: a duplicate may then be relayed once more) and flooded
+  /// broadcasts (flood_ids_evicted: likewise); feasibility distances of
+  /// origins without a route, oldest first (sources_evicted).
   uint64_t floods_evicted = 0;
   uint64_t flood_ids_evicted = 0;
   uint64_t sources_evicted = 0;
@@ -348,12 +349,17 @@ struct routing_config {
   /// interval during its start-up probation: address_allocator.hpp).
   uint32_t announce_every = 10;
   /// How long a flooded broadcast's id is remembered to suppress its
-  /// duplicates, and how many ids at most (the oldest are forgotten first).
+  /// duplicates (flooded control packets: claims, conflicts, seqno
+  /// requests, are remembered for half a hello interval).
   std::chrono::milliseconds flood_memory{30000};
+  /// The one bound of the flood cache (routing/flood_cache.hpp), which
+  /// remembers both: it holds at most min(max_floods, max_flood_ids)
+  /// entries, the soonest to expire forgotten first when full (counted in
+  /// routing_stats::floods_evicted or flood_ids_evicted by what was
+  /// forgotten). Set max_floods; max_flood_ids, the broadcasts' own bound
+  /// before they shared one cache, still lowers it where it is set.
+  size_t max_floods = 8192;
   size_t max_flood_ids = 8192;
-  /// Flooded control packets (claims, conflicts, seqno requests) remembered
-  /// for half a hello interval to suppress their duplicates, at most.
-  size_t max_floods = 4096;
   /// Bounds on the route table (see route_limits).
   route_limits limits;
   /// Neighbours at most, in total and per channel. A fake peer on a

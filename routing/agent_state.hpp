@@ -1,0 +1,163 @@
+#pragma once
+
+// Internal to the routing agent (routing_agent.cpp, agent_auth.cpp,
+// agent_reports.cpp): its state and what those files share. Nothing but
+// them includes it; the agent's interface is routing/routing_agent.hpp.
+// Everything here runs in the agent's thread only.
+
+#include <chrono>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "caf/stateful_actor.hpp"
+#include "caf/typed_event_based_actor.hpp"
+
+#include "routing/address_allocator.hpp"
+#include "routing/auth.hpp"
+#include "routing/flood_cache.hpp"
+#include "routing/neighbour_table.hpp"
+#include "routing/route_table.hpp"
+#include "routing/routing_agent.hpp"
+#include "routing/seqno_requests.hpp"
+#include "routing/type_ids.hpp"
+#include "routing/wire.hpp"
+
+namespace herm::agent_detail {
+
+struct channel_state {
+  channel_actor handle;
+  channel_info info;
+  metric_vector cost = infinite_metrics;
+  link_code code = link_code::unknown;
+};
+
+/// The agent's state: the pure cores (route table, neighbour table, flood
+/// cache, seqno requests, address allocator, authenticator) and what only
+/// an actor has (handles, pending messages, counters).
+struct agent_state {
+  static inline const char* name = "herm.routing";
+
+  routing_config cfg;
+  io_manager_actor io;
+  /// The pure cores; init() sizes them from cfg.
+  route_table table{no_module};
+  neighbour_table neighbours;
+  /// Floods seen recently: control packets (claims, conflicts, seqno
+  /// requests) and broadcasts, keyed by packet type; one bound.
+  flood_cache floods{1};
+  seqno_requests requested;
+  std::unique_ptr<address_allocator> alloc;
+  std::map<channel_id, channel_state> channels;
+  std::map<uint8_t, network_receiver_actor> receivers;
+  /// Triggered updates not sent yet (see apply_change).
+  std::set<module_id> pending_changed;
+  std::set<module_id> pending_starving;
+  bool flush_scheduled = false;
+  uint32_t next_flood_id = 1;
+  /// Route listeners and what they were told last, per destination
+  /// reachable (a subset of the table's destinations), and the
+  /// destinations whose selected route may have changed since the last
+  /// flush (a subset of the table's destinations too, and of the ones it
+  /// dropped since): both bounded by the table's bound.
+  std::vector<route_listener_actor> route_listeners;
+  std::map<module_id, reachability> told;
+  std::set<module_id> pending_told;
+  routing_stats stats;
+  uint16_t hello_seqno = 0;
+  /// Hello intervals and quarter intervals since start.
+  uint32_t ticks = 0;
+  uint32_t quarters = 0;
+  /// Said goodbye: sends no more hellos.
+  bool leaving = false;
+  /// Where the other holder of our static id was last reported heard.
+  std::string conflict_heard;
+  byte_buffer buf;
+  /// Signs and verifies packets when the network has a key.
+  std::unique_ptr<authenticator> auth;
+
+  std::chrono::steady_clock::duration hold() const {
+    return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      cfg.hello_interval * cfg.update_every * cfg.hold_factor);
+  }
+};
+
+using agent_impl = routing_agent_actor::stateful_pointer<agent_state>;
+
+// -- helpers (header-only) ------------------------------------------------------
+
+/// `x` encoded into the agent's scratch buffer (valid until the next use).
+template <class T>
+inline const byte_buffer& encoded(agent_impl self, const T& x) {
+  auto& buf = self->state.buf;
+  buf.clear();
+  encode(x, buf);
+  return buf;
+}
+
+/// True if `x` decoded; counts a malformed packet otherwise.
+template <class T>
+inline bool decoded(agent_impl self, const caf::expected<T>& x) {
+  if (!x)
+    ++self->state.stats.rx_malformed;
+  return static_cast<bool>(x);
+}
+
+// -- sending (routing_agent.cpp) ------------------------------------------------
+
+/// `bytes` as they leave on channel `cs`: with a trailer for that link when
+/// `sign` (a keyed network), else unchanged. Data packets get their
+/// authenticated flag set first.
+byte_buffer outgoing(agent_impl self, const channel_state& cs,
+                     const byte_buffer& bytes, bool sign);
+
+/// Sends a control packet to `dst` on channel `ch` (signed whenever the
+/// network has a key); nothing if the channel is gone.
+void send_on(agent_impl self, channel_id ch, link_addr dst,
+             const byte_buffer& bytes, uint8_t prio = prio_control);
+
+/// Broadcasts `bytes` on every channel but `except` (signed per link in a
+/// keyed network: every hop signs with its own counter).
+void send_all(agent_impl self, const byte_buffer& bytes, channel_id except = 0,
+              uint8_t prio = prio_control);
+
+/// This module's next hello, encoded into the scratch buffer; a goodbye
+/// (interval 0) when `leaving`.
+const byte_buffer& make_hello(agent_impl self, bool leaving);
+
+// -- authentication (agent_auth.cpp) --------------------------------------------
+
+/// In a keyed network: checks the trailer of a received packet of `type`
+/// and strips it. False (and counted) when the packet must be dropped.
+/// Challenge requests and replies are handled here, and never go further.
+bool authenticate(agent_impl self, packet_received& pkt, packet_type type);
+
+// -- reports (agent_reports.cpp) ------------------------------------------------
+
+/// Tells route listeners what changed for `dests` since they were told:
+/// one event per destination whose selected class-0 route differs in any
+/// way (appeared, withdrawn, other cost, hops, next hop or path).
+/// O(|dests| log N).
+void tell_route_changes(agent_impl self, const std::vector<module_id>& dests);
+
+/// Registers a route listener and tells it the current state.
+void subscribe_routes(agent_impl self, route_listener_actor& l);
+
+/// A unicast data packet's trace with its incoming half filled in (`in`:
+/// the channel it came on, 0 for none).
+packet_trace make_trace(agent_impl self, packet_trace::what_t what,
+                        const data_header& h, size_t bytes,
+                        channel_id in = 0);
+
+/// Fills the outgoing half of a trace and hands it to the tracer.
+void trace_out(agent_impl self, packet_trace& t, const data_header& h,
+               const next_hop& nh);
+
+/// What `get routes`, `get neighbors` and `get stats` answer.
+std::vector<route_info> route_rows(agent_impl self);
+std::vector<neighbour_info> neighbour_rows(agent_impl self);
+routing_stats stats_now(agent_impl self);
+
+} // namespace herm::agent_detail
