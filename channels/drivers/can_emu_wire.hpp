@@ -7,14 +7,21 @@
 // other station's unix datagram socket: a 16-byte header followed by the
 // frame exactly as SocketCAN hands it to a program, a struct can_frame
 // (CAN_MTU = 16 bytes) or a struct canfd_frame (CANFD_MTU = 72 bytes). As
-// with SocketCAN, the size alone tells the two apart. All stations of a bus
-// live on one machine, so fields are in host byte order.
+// with SocketCAN, the size alone tells the two apart. The header is the
+// emulated medium's datagram head (emu_wire.hpp), little endian; the frame
+// behind it is in host byte order, as SocketCAN's is (all stations of a bus
+// live on one machine).
+//
+// Bounds per call: O(1), no allocation; encode and decode touch exactly
+// header_size bytes, check reads nothing when the datagram is shorter.
 
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
 
 #include <linux/can.h>
+
+#include "channels/drivers/emu_wire.hpp"
 
 namespace herm::can::wire {
 
@@ -46,21 +53,23 @@ struct header {
   int64_t deliver_at_ns = 0;
 };
 
+static_assert(header_size == emu::datagram_head_size);
+
+/// Writes `h` to `out[0..header_size)`.
 inline void encode(const header& h, uint8_t* out) {
-  std::memcpy(out + 0, &h.magic, 2);
-  std::memcpy(out + 2, &h.version, 1);
-  std::memcpy(out + 3, &h.flags, 1);
-  std::memcpy(out + 4, &h.reserved, 4);
-  std::memcpy(out + 8, &h.deliver_at_ns, 8);
+  emu::put_head({h.magic, h.version, h.flags, h.reserved, h.deliver_at_ns},
+                out);
 }
 
+/// Reads a header from `in[0..header_size)` without checking it.
 inline header decode(const uint8_t* in) {
+  auto g = emu::get_head(in);
   header h;
-  std::memcpy(&h.magic, in + 0, 2);
-  std::memcpy(&h.version, in + 2, 1);
-  std::memcpy(&h.flags, in + 3, 1);
-  std::memcpy(&h.reserved, in + 4, 4);
-  std::memcpy(&h.deliver_at_ns, in + 8, 8);
+  h.magic = g.magic;
+  h.version = g.version;
+  h.flags = g.flags;
+  h.reserved = g.word;
+  h.deliver_at_ns = g.deliver_at_ns;
   return h;
 }
 
@@ -73,6 +82,9 @@ enum class status {
   bad_size,      ///< the frame is neither CAN_MTU nor CANFD_MTU bytes
   too_far_ahead, ///< deliver_at more than max_hold_ns in the future
 };
+
+static_assert(static_cast<int>(status::bad_header)
+              == static_cast<int>(emu::head_status::bad_header));
 
 inline const char* to_string(status x) {
   switch (x) {
@@ -93,18 +105,16 @@ inline const char* to_string(status x) {
 /// `hdr` for every status but too_short.
 inline status check(const uint8_t* data, size_t size, int64_t now_ns,
                     header& hdr) {
-  if (size < header_size)
+  auto head = emu::check_head(data, size, magic, version, flag_mask,
+                              0xFFFFFFFF);
+  if (head == emu::head_status::too_short)
     return status::too_short;
   hdr = decode(data);
-  if (hdr.magic != magic)
-    return status::bad_magic;
-  if (hdr.version != version)
-    return status::bad_version;
-  if ((hdr.flags & ~flag_mask) != 0 || hdr.reserved != 0)
-    return status::bad_header;
+  if (head != emu::head_status::ok)
+    return static_cast<status>(head);
   if (size != header_size + CAN_MTU && size != header_size + CANFD_MTU)
     return status::bad_size;
-  if (hdr.deliver_at_ns > now_ns && hdr.deliver_at_ns - now_ns > max_hold_ns)
+  if (emu::held_too_long(hdr.deliver_at_ns, now_ns, max_hold_ns))
     return status::too_far_ahead;
   return status::ok;
 }

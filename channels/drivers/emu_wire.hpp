@@ -5,13 +5,20 @@
 // in as an argument, so the driver and its tests share one definition.
 //
 // Every datagram a station sends to another station's socket is one
-// wire_header followed by the frame's payload (0..MTU bytes). All stations
-// of a medium live on one machine, so fields are in host byte order.
+// wire_header followed by the frame's payload (0..MTU bytes). Fields are
+// little endian (channels/le_codec.hpp); all stations of a medium live on
+// one machine, where that is also the host's order.
+//
+// Bounds per call: everything here is O(1) (the header has a fixed size),
+// allocates nothing and reads or writes exactly wire_header_size bytes;
+// check reads nothing when the datagram is shorter than that.
 
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+
+#include "channels/le_codec.hpp"
 
 namespace herm::emu {
 
@@ -60,25 +67,94 @@ struct wire_header {
   int64_t deliver_at_ns = 0;
 };
 
+// -- datagram head, shared with the emulated CAN bus (can_emu_wire.hpp) ------
+
+/// The 16 bytes both emulated media put before a frame:
+///
+///   magic (2) | version (1) | flags (1) | word (4) | deliver_at_ns (8)
+///
+/// `word` is src | reserved << 16 here, the reserved field on CAN.
+struct datagram_head {
+  uint16_t magic = 0;
+  uint8_t version = 0;
+  uint8_t flags = 0;
+  uint32_t word = 0;
+  int64_t deliver_at_ns = 0;
+};
+
+constexpr size_t datagram_head_size = 16;
+
+/// Writes `h` to `out[0..datagram_head_size)`.
+inline void put_head(const datagram_head& h, uint8_t* out) {
+  store_le(h.magic, out);
+  out[2] = h.version;
+  out[3] = h.flags;
+  store_le(h.word, out + 4);
+  store_le(static_cast<uint64_t>(h.deliver_at_ns), out + 8);
+}
+
+/// Reads `in[0..datagram_head_size)` without checking it.
+inline datagram_head get_head(const uint8_t* in) {
+  datagram_head h;
+  h.magic = load_le<uint16_t>(in);
+  h.version = in[2];
+  h.flags = in[3];
+  h.word = load_le<uint32_t>(in + 4);
+  h.deliver_at_ns = static_cast<int64_t>(load_le<uint64_t>(in + 8));
+  return h;
+}
+
+/// The checks both media make of a head, in this order; each medium's
+/// status enum starts with these five values.
+enum class head_status { ok, too_short, bad_magic, bad_version, bad_header };
+
+/// Reads and checks the head of a datagram of `size` bytes: long enough,
+/// `magic`, `version`, no flag outside `flag_mask`, reserved bits
+/// (`reserved_mask` of the word) zero. `data` holds at least
+/// min(size, datagram_head_size) bytes.
+inline head_status check_head(const uint8_t* data, size_t size,
+                              uint16_t magic, uint8_t version,
+                              uint8_t flag_mask, uint32_t reserved_mask) {
+  if (size < datagram_head_size)
+    return head_status::too_short;
+  auto h = get_head(data);
+  if (h.magic != magic)
+    return head_status::bad_magic;
+  if (h.version != version)
+    return head_status::bad_version;
+  if ((h.flags & ~flag_mask) != 0 || (h.word & reserved_mask) != 0)
+    return head_status::bad_header;
+  return head_status::ok;
+}
+
+/// Whether a datagram to be delivered at `deliver_at_ns` asks to be held
+/// more than `max_hold` ns after `now_ns` (it would pin a slot for ever).
+constexpr bool held_too_long(int64_t deliver_at_ns, int64_t now_ns,
+                             int64_t max_hold) {
+  return deliver_at_ns > now_ns && deliver_at_ns - now_ns > max_hold;
+}
+
+// -- this medium's header ----------------------------------------------------------
+
+static_assert(wire_header_size == datagram_head_size);
+
 /// Writes `h` to `out[0..wire_header_size)`.
 inline void encode(const wire_header& h, uint8_t* out) {
-  std::memcpy(out + 0, &h.magic, 2);
-  std::memcpy(out + 2, &h.version, 1);
-  std::memcpy(out + 3, &h.flags, 1);
-  std::memcpy(out + 4, &h.src, 2);
-  std::memcpy(out + 6, &h.reserved, 2);
-  std::memcpy(out + 8, &h.deliver_at_ns, 8);
+  put_head({h.magic, h.version, h.flags,
+            uint32_t{h.src} | uint32_t{h.reserved} << 16, h.deliver_at_ns},
+           out);
 }
 
 /// Reads a header from `in[0..wire_header_size)` without checking it.
 inline wire_header decode(const uint8_t* in) {
+  auto g = get_head(in);
   wire_header h;
-  std::memcpy(&h.magic, in + 0, 2);
-  std::memcpy(&h.version, in + 2, 1);
-  std::memcpy(&h.flags, in + 3, 1);
-  std::memcpy(&h.src, in + 4, 2);
-  std::memcpy(&h.reserved, in + 6, 2);
-  std::memcpy(&h.deliver_at_ns, in + 8, 8);
+  h.magic = g.magic;
+  h.version = g.version;
+  h.flags = g.flags;
+  h.src = static_cast<uint16_t>(g.word);
+  h.reserved = static_cast<uint16_t>(g.word >> 16);
+  h.deliver_at_ns = g.deliver_at_ns;
   return h;
 }
 
@@ -93,6 +169,9 @@ enum class wire_status {
   oversized,     ///< payload larger than the receiver's MTU
   too_far_ahead, ///< deliver_at more than max_hold_ns in the future
 };
+
+static_assert(static_cast<int>(wire_status::bad_header)
+              == static_cast<int>(head_status::bad_header));
 
 /// Short reason for people, e.g. for frame_handler::on_malformed.
 inline const char* to_string(wire_status x) {
@@ -116,20 +195,18 @@ inline const char* to_string(wire_status x) {
 /// be read (every status but too_short).
 inline wire_status check(const uint8_t* data, size_t size, uint32_t mtu,
                          int64_t now_ns, wire_header& hdr) {
-  if (size < wire_header_size)
+  auto head = check_head(data, size, wire_magic, wire_version, flag_mask,
+                         0xFFFF0000);
+  if (head == head_status::too_short)
     return wire_status::too_short;
   hdr = decode(data);
-  if (hdr.magic != wire_magic)
-    return wire_status::bad_magic;
-  if (hdr.version != wire_version)
-    return wire_status::bad_version;
-  if ((hdr.flags & ~flag_mask) != 0 || hdr.reserved != 0)
-    return wire_status::bad_header;
+  if (head != head_status::ok)
+    return static_cast<wire_status>(head);
   if (hdr.src < min_station || hdr.src > max_station)
     return wire_status::bad_source;
   if (size - wire_header_size > mtu)
     return wire_status::oversized;
-  if (hdr.deliver_at_ns > now_ns && hdr.deliver_at_ns - now_ns > max_hold_ns)
+  if (held_too_long(hdr.deliver_at_ns, now_ns, max_hold_ns))
     return wire_status::too_far_ahead;
   return wire_status::ok;
 }

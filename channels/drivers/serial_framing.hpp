@@ -16,6 +16,17 @@
 // delimiter. With XON/XOFF flow control the tty itself consumes 0x11 and
 // 0x13, so in that mode the encoded bytes 0x11, 0x13 and 0x7D additionally
 // travel as 0x7D followed by the byte XOR 0x20 ("escaped" mode).
+//
+// Bounds per call: encode_frame and cobs_encode/cobs_decode are O(n) in the
+// frame size and allocate nothing (encode_frame uses two stack buffers of
+// under 600 bytes); append_frame grows the caller's buffer by at most
+// max_wire_size(size, escaped) bytes. decoder::feed is O(size) plus O(MTU)
+// per delimiter, allocates nothing (its two buffers of
+// cobs_max_size(mtu + crc_size) bytes are made by the constructor) and
+// never writes past them: a run longer than the largest valid frame is
+// counted as oversized and skipped to the next delimiter. The only
+// multi-byte integer is the CRC, big endian by the specification, so this
+// framing needs nothing from channels/le_codec.hpp.
 
 #include <array>
 #include <cstddef>
