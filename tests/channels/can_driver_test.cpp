@@ -48,23 +48,21 @@
 #include <linux/netlink.h>
 #include <linux/rtnetlink.h>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/can_emu_wire.hpp"
 #include "channels/drivers/can_id.hpp"
 #include "channels/link_driver.hpp"
+#include "tests/channels/recorder.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
+using herm::test::recorder;
 
 namespace {
 
 // -- helpers ---------------------------------------------------------------------
 
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
+constexpr auto now_ns = recorder::now_ns;
 
 byte_buffer bytes_of(const std::string& str) {
   return byte_buffer(str.begin(), str.end());
@@ -90,107 +88,6 @@ void remove_tree(const std::string& path) {
 bool contains(const std::string& haystack, const std::string& needle) {
   return haystack.find(needle) != std::string::npos;
 }
-
-/// Thread-safe frame_handler that records everything; waits are bounded.
-class recorder : public frame_handler {
-public:
-  struct frame {
-    link_addr src;
-    byte_buffer bytes;
-    int64_t at_ns; // CLOCK_MONOTONIC time of the on_frame call
-    uint8_t lane = 0;
-  };
-
-  struct malformed {
-    link_addr src;
-    std::string why;
-  };
-
-  struct event {
-    link_event_kind kind;
-    std::string detail;
-  };
-
-  void on_frame(link_addr src, const uint8_t* data, size_t size) override {
-    on_frame_in_lane(src, 0, data, size);
-  }
-
-  void on_frame_in_lane(link_addr src, uint8_t lane, const uint8_t* data,
-                        size_t size) override {
-    auto at = now_ns();
-    std::lock_guard<std::mutex> guard{mtx_};
-    frames_.push_back({src, byte_buffer(data, data + size), at, lane});
-    cv_.notify_all();
-  }
-
-  void on_malformed(link_addr src, const char* why) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    malformed_.push_back({src, why});
-    cv_.notify_all();
-  }
-
-  void on_event(link_event_kind kind, link_addr, std::string detail) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    events_.push_back({kind, std::move(detail)});
-    cv_.notify_all();
-  }
-
-  void on_failure(caf::error reason) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    failures_.push_back(std::move(reason));
-    cv_.notify_all();
-  }
-
-  bool wait_frames(size_t n, std::chrono::milliseconds timeout = 10s) {
-    return wait(timeout, [&] { return frames_.size() >= n; });
-  }
-
-  bool wait_malformed(size_t n, std::chrono::milliseconds timeout = 10s) {
-    return wait(timeout, [&] { return malformed_.size() >= n; });
-  }
-
-  bool wait_events(size_t n, std::chrono::milliseconds timeout = 10s) {
-    return wait(timeout, [&] { return events_.size() >= n; });
-  }
-
-  bool wait_failures(size_t n, std::chrono::milliseconds timeout = 10s) {
-    return wait(timeout, [&] { return failures_.size() >= n; });
-  }
-
-  std::vector<frame> frames() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return frames_;
-  }
-
-  std::vector<malformed> malformed_frames() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return malformed_;
-  }
-
-  std::vector<event> events() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return events_;
-  }
-
-  std::vector<caf::error> failures() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return failures_;
-  }
-
-private:
-  template <class Pred>
-  bool wait(std::chrono::milliseconds timeout, Pred pred) {
-    std::unique_lock<std::mutex> lk{mtx_};
-    return cv_.wait_for(lk, timeout, pred);
-  }
-
-  mutable std::mutex mtx_;
-  std::condition_variable cv_;
-  std::vector<frame> frames_;
-  std::vector<malformed> malformed_;
-  std::vector<event> events_;
-  std::vector<caf::error> failures_;
-};
 
 /// A started driver and what it heard.
 struct station {
@@ -749,29 +646,8 @@ TEST_F(can_emu_test, addresses_are_node_ids) {
 
 // -- the emulated bus ---------------------------------------------------------------
 
-TEST_F(can_emu_test, two_stations_exchange_frames_across_threads) {
-  auto a = start("can0", {{"node", "1"}});
-  auto b = start("can1", {{"node", "2"}});
-  ASSERT_TRUE(a.driver && b.driver);
-  ASSERT_FALSE(a.send(2, bytes_of("hello")));
-  ASSERT_FALSE(b.send(1, bytes_of("world!!!")));
-  ASSERT_FALSE(a.send(2, byte_buffer{}));
-  ASSERT_TRUE(b.rec->wait_frames(2));
-  ASSERT_TRUE(a.rec->wait_frames(1));
-  auto at_b = b.rec->frames();
-  auto at_a = a.rec->frames();
-  EXPECT_EQ(at_b[0].src, 1u);
-  EXPECT_EQ(at_b[0].bytes, bytes_of("hello"));
-  EXPECT_EQ(at_b[1].src, 1u);
-  EXPECT_TRUE(at_b[1].bytes.empty());
-  EXPECT_EQ(at_a[0].src, 2u);
-  EXPECT_EQ(at_a[0].bytes, bytes_of("world!!!"));
-  EXPECT_EQ(a.counter("tx_frames"), 2u);
-  EXPECT_TRUE(a.rec->malformed_frames().empty());
-  EXPECT_TRUE(b.rec->malformed_frames().empty());
-}
-
-TEST_F(can_emu_test, three_stations_hear_broadcasts_and_filter_unicasts_by_destination) {
+TEST_F(can_emu_test, every_station_hears_every_frame_and_counts_unicasts_for_others_as_filtered) {
+  // Delivery by destination is the conformance suite's; this is the counter.
   auto a = start("can0", {{"node", "1"}});
   auto b = start("can1", {{"node", "2"}});
   auto c = start("can2", {{"node", "3"}});
@@ -781,26 +657,10 @@ TEST_F(can_emu_test, three_stations_hear_broadcasts_and_filter_unicasts_by_desti
   ASSERT_FALSE(a.send(3, bytes_of("to c")));
   ASSERT_TRUE(b.rec->wait_frames(2));
   ASSERT_TRUE(c.rec->wait_frames(2));
-  auto at_b = b.rec->frames();
-  auto at_c = c.rec->frames();
-  ASSERT_EQ(at_b.size(), 2u);
-  ASSERT_EQ(at_c.size(), 2u);
-  EXPECT_EQ(text_of(at_b[0].bytes), "all");
-  EXPECT_EQ(text_of(at_b[1].bytes), "to b");
-  EXPECT_EQ(text_of(at_c[0].bytes), "all");
-  EXPECT_EQ(text_of(at_c[1].bytes), "to c");
-  // Every station heard every frame; each filtered the other's unicast.
   EXPECT_TRUE(wait_counter(b, "rx_filtered", 1));
   EXPECT_TRUE(wait_counter(c, "rx_filtered", 1));
   EXPECT_EQ(b.counter("rx_filtered"), 1u);
   EXPECT_EQ(c.counter("rx_filtered"), 1u);
-  // The sender hears none of its own frames: a marker from b arrives after
-  // anything a would have heard.
-  ASSERT_FALSE(b.send(1, bytes_of("marker")));
-  ASSERT_TRUE(a.rec->wait_frames(1));
-  auto at_a = a.rec->frames();
-  ASSERT_EQ(at_a.size(), 1u);
-  EXPECT_EQ(text_of(at_a[0].bytes), "marker");
 }
 
 TEST_F(can_emu_test, receivers_hear_each_frame_in_the_lane_its_sender_chose) {
@@ -823,23 +683,6 @@ TEST_F(can_emu_test, receivers_hear_each_frame_in_the_lane_its_sender_chose) {
   for (auto& f : b.rec->frames())
     heard.insert(f.lane);
   EXPECT_EQ(heard, want);
-}
-
-TEST_F(can_emu_test, send_enforces_the_mtu_and_node_addresses) {
-  auto a = start("can0", {{"node", "1"}});
-  auto b = start("can1", {{"node", "2"}});
-  ASSERT_TRUE(a.driver && b.driver);
-  auto err = a.send(2, byte_buffer(9, 0xAA));
-  EXPECT_TRUE(is(err, ec::packet_too_large)) << render(err);
-  EXPECT_TRUE(contains(render(err), "MTU of 8")) << render(err);
-  EXPECT_TRUE(contains(render(err), "device 'can0'")) << render(err);
-  for (link_addr dst : {link_addr{0}, link_addr{255}, link_addr{1} << 40}) {
-    auto e = a.send(dst, bytes_of("x"));
-    EXPECT_TRUE(is(e, ec::invalid_address)) << dst << ": " << render(e);
-  }
-  ASSERT_FALSE(a.send(2, byte_buffer(8, 0xBB)));
-  ASSERT_TRUE(b.rec->wait_frames(1));
-  EXPECT_EQ(b.rec->frames()[0].bytes, byte_buffer(8, 0xBB));
 }
 
 TEST_F(can_emu_test, fd_stations_carry_up_to_64_bytes_of_any_length) {

@@ -27,20 +27,18 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/emu_wire.hpp"
 #include "channels/link_driver.hpp"
+#include "tests/channels/recorder.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
+using herm::test::recorder;
 
 namespace {
 
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
+constexpr auto now_ns = recorder::now_ns;
 
 byte_buffer bytes_of(const std::string& str) {
   return byte_buffer(str.begin(), str.end());
@@ -70,84 +68,6 @@ int remove_entry(const char* path, const struct stat*, int, FTW*) {
 void remove_tree(const std::string& path) {
   ::nftw(path.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS);
 }
-
-/// Thread-safe frame_handler that records everything; waits are bounded.
-class recorder : public frame_handler {
-public:
-  struct frame {
-    link_addr src;
-    byte_buffer bytes;
-    int64_t at_ns; // CLOCK_MONOTONIC time of the on_frame call
-  };
-
-  struct malformed {
-    link_addr src;
-    std::string why;
-  };
-
-  void on_frame(link_addr src, const uint8_t* data, size_t size) override {
-    auto at = now_ns();
-    std::lock_guard<std::mutex> guard{mtx_};
-    frames_.push_back({src, byte_buffer(data, data + size), at});
-    cv_.notify_all();
-  }
-
-  void on_malformed(link_addr src, const char* why) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    malformed_.push_back({src, why});
-    cv_.notify_all();
-  }
-
-  void on_event(link_event_kind, link_addr, std::string) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    ++events_;
-    cv_.notify_all();
-  }
-
-  void on_failure(caf::error reason) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    failures_.push_back(std::move(reason));
-    cv_.notify_all();
-  }
-
-  bool wait_frames(size_t n, std::chrono::milliseconds timeout = 10s) {
-    std::unique_lock<std::mutex> lk{mtx_};
-    return cv_.wait_for(lk, timeout, [&] { return frames_.size() >= n; });
-  }
-
-  bool wait_malformed(size_t n, std::chrono::milliseconds timeout = 10s) {
-    std::unique_lock<std::mutex> lk{mtx_};
-    return cv_.wait_for(lk, timeout, [&] { return malformed_.size() >= n; });
-  }
-
-  bool wait_failures(size_t n, std::chrono::milliseconds timeout = 10s) {
-    std::unique_lock<std::mutex> lk{mtx_};
-    return cv_.wait_for(lk, timeout, [&] { return failures_.size() >= n; });
-  }
-
-  std::vector<frame> frames() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return frames_;
-  }
-
-  std::vector<malformed> malformed_frames() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return malformed_;
-  }
-
-  std::vector<caf::error> failures() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return failures_;
-  }
-
-private:
-  mutable std::mutex mtx_;
-  std::condition_variable cv_;
-  std::vector<frame> frames_;
-  std::vector<malformed> malformed_;
-  std::vector<caf::error> failures_;
-  size_t events_ = 0;
-};
 
 /// A started driver and what it heard.
 struct station {
@@ -234,72 +154,6 @@ protected:
 
 // -- basic exchange ----------------------------------------------------------------
 
-TEST_F(emu_driver_test, two_stations_exchange_unicast_frames) {
-  auto a = start("fw0", {{"station", "1"}});
-  auto b = start("fw1", {{"station", "2"}});
-  ASSERT_TRUE(a.driver && b.driver);
-  EXPECT_EQ(a.driver->local_addr(), 1u);
-  EXPECT_EQ(b.driver->local_addr(), 2u);
-  EXPECT_EQ(a.driver->profile().name, "ieee1394a");
-  ASSERT_FALSE(a.send(2, bytes_of("hello")));
-  ASSERT_FALSE(b.send(1, bytes_of("world")));
-  ASSERT_TRUE(b.rec->wait_frames(1));
-  ASSERT_TRUE(a.rec->wait_frames(1));
-  auto at_b = b.rec->frames();
-  auto at_a = a.rec->frames();
-  EXPECT_EQ(at_b[0].src, 1u);
-  EXPECT_EQ(at_b[0].bytes, bytes_of("hello"));
-  EXPECT_EQ(at_a[0].src, 2u);
-  EXPECT_EQ(at_a[0].bytes, bytes_of("world"));
-}
-
-TEST_F(emu_driver_test, empty_frames_are_carried) {
-  auto a = start("fw0", {{"station", "1"}});
-  auto b = start("fw1", {{"station", "2"}});
-  ASSERT_TRUE(a.driver && b.driver);
-  ASSERT_FALSE(a.send(2, byte_buffer{}));
-  ASSERT_TRUE(b.rec->wait_frames(1));
-  EXPECT_TRUE(b.rec->frames()[0].bytes.empty());
-}
-
-TEST_F(emu_driver_test, broadcast_on_a_bus_reaches_every_other_station_only) {
-  auto a = start("fw0", {{"station", "1"}});
-  auto b = start("fw1", {{"station", "2"}});
-  auto c = start("fw2", {{"station", "3"}});
-  ASSERT_TRUE(a.driver && b.driver && c.driver);
-  ASSERT_FALSE(a.send(broadcast_addr, bytes_of("all")));
-  // A unicast behind the broadcast: once it is heard, the broadcast has been
-  // handed to every destination, a copy to the sender included, if any.
-  ASSERT_FALSE(a.send(2, bytes_of("after")));
-  ASSERT_TRUE(b.rec->wait_frames(2));
-  ASSERT_TRUE(c.rec->wait_frames(1));
-  EXPECT_EQ(b.rec->frames()[0].bytes, bytes_of("all"));
-  EXPECT_EQ(b.rec->frames()[0].src, 1u);
-  EXPECT_EQ(c.rec->frames()[0].bytes, bytes_of("all"));
-  EXPECT_EQ(c.rec->frames()[0].src, 1u);
-  // The sender's own socket is FIFO: a marker from b arrives after any copy
-  // of the broadcast would have.
-  ASSERT_FALSE(b.send(1, bytes_of("marker")));
-  ASSERT_TRUE(a.rec->wait_frames(1));
-  auto at_a = a.rec->frames();
-  ASSERT_EQ(at_a.size(), 1u);
-  EXPECT_EQ(at_a[0].bytes, bytes_of("marker"));
-}
-
-TEST_F(emu_driver_test, frames_arrive_in_send_order_without_jitter) {
-  auto a = start("eth0", {{"profile", "ethernet"}, {"station", "1"}});
-  auto b = start("eth1", {{"profile", "ethernet"}, {"station", "2"}});
-  ASSERT_TRUE(a.driver && b.driver);
-  constexpr uint32_t n = 200;
-  for (uint32_t i = 0; i < n; ++i)
-    ASSERT_FALSE(a.send(2, numbered(i, 64))) << "frame " << i;
-  ASSERT_TRUE(b.rec->wait_frames(n));
-  auto frames = b.rec->frames();
-  ASSERT_EQ(frames.size(), n);
-  for (uint32_t i = 0; i < n; ++i)
-    EXPECT_EQ(number_of(frames[i].bytes), i);
-}
-
 TEST_F(emu_driver_test, unicast_to_an_absent_station_goes_nowhere) {
   auto a = start("fw0", {{"station", "1"}});
   auto b = start("fw1", {{"station", "2"}});
@@ -314,29 +168,6 @@ TEST_F(emu_driver_test, unicast_to_an_absent_station_goes_nowhere) {
 }
 
 // -- send errors --------------------------------------------------------------------
-
-TEST_F(emu_driver_test, send_refuses_frames_larger_than_the_mtu) {
-  auto a = start("can0", {{"profile", "can2.0"}, {"station", "1"}});
-  auto b = start("can1", {{"profile", "can2.0"}, {"station", "2"}});
-  ASSERT_TRUE(a.driver && b.driver);
-  ASSERT_EQ(a.driver->profile().mtu, 8u);
-  auto err = a.send(2, byte_buffer(9, 0xAA));
-  EXPECT_TRUE(is(err, ec::packet_too_large)) << render(err);
-  EXPECT_NE(render(err).find("device 'can0'"), std::string::npos);
-  EXPECT_NE(render(err).find("MTU of 8"), std::string::npos);
-  ASSERT_FALSE(a.send(2, byte_buffer(8, 0xBB)));
-  ASSERT_TRUE(b.rec->wait_frames(1));
-  EXPECT_EQ(b.rec->frames()[0].bytes, byte_buffer(8, 0xBB));
-}
-
-TEST_F(emu_driver_test, send_refuses_addresses_that_are_no_station) {
-  auto a = start("fw0", {{"station", "1"}});
-  ASSERT_TRUE(a.driver);
-  for (link_addr dst : {link_addr{0}, link_addr{255}, link_addr{1} << 40}) {
-    auto err = a.send(dst, bytes_of("x"));
-    EXPECT_TRUE(is(err, ec::invalid_address)) << dst << ": " << render(err);
-  }
-}
 
 TEST_F(emu_driver_test, full_transmit_queue_refuses_frames) {
   // 100 bit/s: the first frame occupies the medium for 2.56 s, so nothing

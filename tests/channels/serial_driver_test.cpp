@@ -39,17 +39,19 @@
 #include <thread>
 #include <vector>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/serial_framing.hpp"
 #include "channels/drivers/serial_settings.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/testing/null_modem.hpp"
+#include "tests/channels/recorder.hpp"
 
 namespace herm {
 namespace {
 
 using namespace std::chrono_literals;
 using clock_type = std::chrono::steady_clock;
+using test::recorder;
 
 /// Upper bound for anything the tests wait for.
 constexpr auto wait_limit = 10s;
@@ -232,93 +234,6 @@ events reference_decode(const byte_buffer& stream, uint32_t mtu,
     result.push_back("frame:" + to_hex(raw.data(), n));
   }
 }
-
-// -- recording frame handler -----------------------------------------------------
-
-struct heard_malformed {
-  link_addr src;
-  std::string why;
-};
-
-/// Records every handler call; thread-safe; waits are bounded.
-class recorder : public frame_handler {
-public:
-  void on_frame(link_addr src, const uint8_t* data, size_t size) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    srcs_.push_back(src);
-    frames_.emplace_back(data, data + size);
-    cv_.notify_all();
-  }
-
-  void on_malformed(link_addr src, const char* why) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    malformed_.push_back(heard_malformed{src, why});
-    cv_.notify_all();
-  }
-
-  void on_event(link_event_kind kind, link_addr, std::string detail) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    events_.push_back(std::to_string(static_cast<int>(kind)) + ": " + detail);
-    cv_.notify_all();
-  }
-
-  void on_failure(caf::error reason) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    failures_.push_back(reason);
-    cv_.notify_all();
-  }
-
-  bool wait_frames(size_t n) {
-    std::unique_lock<std::mutex> guard{mtx_};
-    return cv_.wait_for(guard, wait_limit, [&] { return frames_.size() >= n; });
-  }
-
-  bool wait_malformed(size_t n) {
-    std::unique_lock<std::mutex> guard{mtx_};
-    return cv_.wait_for(guard, wait_limit,
-                        [&] { return malformed_.size() >= n; });
-  }
-
-  bool wait_failure() {
-    std::unique_lock<std::mutex> guard{mtx_};
-    return cv_.wait_for(guard, wait_limit, [&] { return !failures_.empty(); });
-  }
-
-  std::vector<byte_buffer> frames() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return frames_;
-  }
-
-  std::vector<link_addr> sources() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return srcs_;
-  }
-
-  std::vector<heard_malformed> malformed() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return malformed_;
-  }
-
-  std::vector<caf::error> failures() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return failures_;
-  }
-
-  /// Frames plus malformed reports: grows while anything arrives.
-  size_t activity() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return frames_.size() + malformed_.size();
-  }
-
-private:
-  mutable std::mutex mtx_;
-  std::condition_variable cv_;
-  std::vector<link_addr> srcs_;
-  std::vector<byte_buffer> frames_;
-  std::vector<heard_malformed> malformed_;
-  std::vector<std::string> events_;
-  std::vector<caf::error> failures_;
-};
 
 // -- drivers -----------------------------------------------------------------------
 
@@ -978,9 +893,9 @@ TEST_F(serial_driver, puts_the_documented_bytes_on_the_wire_and_reads_them_back)
             static_cast<ssize_t>(in.size()));
   ASSERT_TRUE(s.rec->wait_frames(1));
   ASSERT_TRUE(s.rec->wait_malformed(1));
-  EXPECT_EQ(to_hex(s.rec->frames().at(0)), "004869");
+  EXPECT_EQ(to_hex(s.rec->payloads().at(0)), "004869");
   EXPECT_EQ(s.rec->sources().at(0), 1u);
-  auto bad = s.rec->malformed().at(0);
+  auto bad = s.rec->malformed_frames().at(0);
   EXPECT_EQ(bad.src, 0u);
   EXPECT_EQ(bad.why, "serial: bad COBS encoding");
   EXPECT_EQ(s.param("rx_bad_cobs"), "1");
@@ -1056,7 +971,7 @@ TEST_F(serial_driver, stops_once_and_refuses_to_send_afterwards) {
   ASSERT_EQ(::write(pty.p.master, in.data(), in.size()),
             static_cast<ssize_t>(in.size()));
   std::this_thread::sleep_for(50ms);
-  EXPECT_TRUE(s.rec->frames().empty());
+  EXPECT_TRUE(s.rec->payloads().empty());
   EXPECT_TRUE(s.rec->failures().empty());
 }
 
@@ -1298,14 +1213,14 @@ void exchange_both_ways(uint64_t baud, size_t count) {
     ASSERT_FALSE(a.send(from_a.back(), i % 2 == 0 ? 1 : broadcast_addr));
     ASSERT_FALSE(b.send(from_b.back()));
   }
-  ASSERT_TRUE(b.rec->wait_frames(count)) << b.rec->frames().size();
-  ASSERT_TRUE(a.rec->wait_frames(count)) << a.rec->frames().size();
-  EXPECT_EQ(b.rec->frames(), from_a);
-  EXPECT_EQ(a.rec->frames(), from_b);
+  ASSERT_TRUE(b.rec->wait_frames(count)) << b.rec->payloads().size();
+  ASSERT_TRUE(a.rec->wait_frames(count)) << a.rec->payloads().size();
+  EXPECT_EQ(b.rec->payloads(), from_a);
+  EXPECT_EQ(a.rec->payloads(), from_b);
   for (auto src : b.rec->sources())
     EXPECT_EQ(src, 1u);
-  EXPECT_TRUE(a.rec->malformed().empty());
-  EXPECT_TRUE(b.rec->malformed().empty());
+  EXPECT_TRUE(a.rec->malformed_frames().empty());
+  EXPECT_TRUE(b.rec->malformed_frames().empty());
   EXPECT_TRUE(a.rec->failures().empty());
   EXPECT_EQ(a.param("tx_frames"), std::to_string(count));
   EXPECT_EQ(b.param("rx_frames"), std::to_string(count));
@@ -1357,15 +1272,15 @@ TEST_F(serial_driver, a_noisy_line_loses_frames_but_never_alters_one) {
     ASSERT_FALSE(a.send(frame));
   }
   ASSERT_TRUE(wait_quiet(*cable, [&] { return b.rec->activity(); }));
-  auto got = b.rec->frames();
+  auto got = b.rec->payloads();
   for (auto& frame : got)
     EXPECT_EQ(sent.count(frame), 1u) << "altered frame " << to_hex(frame);
   EXPECT_GT(got.size(), 0u);
   EXPECT_LT(got.size(), count);
   auto line = cable->a_to_b();
   EXPECT_GT(line.dropped + line.flipped + line.inserted, 0u);
-  EXPECT_GT(b.rec->malformed().size(), 0u);
-  EXPECT_EQ(b.param("rx_malformed"), std::to_string(b.rec->malformed().size()));
+  EXPECT_GT(b.rec->malformed_frames().size(), 0u);
+  EXPECT_EQ(b.param("rx_malformed"), std::to_string(b.rec->malformed_frames().size()));
   EXPECT_TRUE(b.rec->failures().empty());
 }
 
@@ -1379,7 +1294,7 @@ TEST_F(serial_driver, unplugging_the_cable_fails_both_drivers_exactly_once) {
   ASSERT_TRUE(b.rec->wait_frames(1));
   cable->unplug();
   for (auto* s : {&a, &b}) {
-    ASSERT_TRUE(s->rec->wait_failure());
+    ASSERT_TRUE(s->rec->wait_failures(1));
     auto err = s->rec->failures().at(0);
     auto text = render(err);
     EXPECT_TRUE(is(err, ec::device_failed)) << text;
@@ -1420,9 +1335,9 @@ TEST_F(serial_driver, a_stalled_line_fills_the_buffer_but_splits_no_frame) {
   // The kernel holds some, the driver's buffer the rest.
   EXPECT_GT(accepted.size(), 16u);
   cable->pause(false);
-  ASSERT_TRUE(b.rec->wait_frames(accepted.size())) << b.rec->frames().size();
-  EXPECT_EQ(b.rec->frames(), accepted);
-  EXPECT_TRUE(b.rec->malformed().empty());
+  ASSERT_TRUE(b.rec->wait_frames(accepted.size())) << b.rec->payloads().size();
+  EXPECT_EQ(b.rec->payloads(), accepted);
+  EXPECT_TRUE(b.rec->malformed_frames().empty());
   EXPECT_EQ(a.param("tx_queued"), "0");
 }
 
@@ -1448,12 +1363,12 @@ TEST_F(serial_driver, xonxoff_flow_control_carries_frames_full_of_control_charac
     ASSERT_FALSE(a.send(frame));
     ASSERT_FALSE(b.send(frame));
   }
-  ASSERT_TRUE(b.rec->wait_frames(frames.size())) << b.rec->frames().size();
-  ASSERT_TRUE(a.rec->wait_frames(frames.size())) << a.rec->frames().size();
-  EXPECT_EQ(b.rec->frames(), frames);
-  EXPECT_EQ(a.rec->frames(), frames);
-  EXPECT_TRUE(a.rec->malformed().empty());
-  EXPECT_TRUE(b.rec->malformed().empty());
+  ASSERT_TRUE(b.rec->wait_frames(frames.size())) << b.rec->payloads().size();
+  ASSERT_TRUE(a.rec->wait_frames(frames.size())) << a.rec->payloads().size();
+  EXPECT_EQ(b.rec->payloads(), frames);
+  EXPECT_EQ(a.rec->payloads(), frames);
+  EXPECT_TRUE(a.rec->malformed_frames().empty());
+  EXPECT_TRUE(b.rec->malformed_frames().empty());
 }
 
 TEST_F(serial_driver, set_param_baud_reapplies_termios) {
@@ -1485,7 +1400,7 @@ TEST_F(serial_driver, set_param_baud_reapplies_termios) {
   auto frame = numbered_frame(1, 20);
   ASSERT_FALSE(a.send(frame));
   ASSERT_TRUE(b.rec->wait_frames(1));
-  EXPECT_EQ(b.rec->frames().at(0), frame);
+  EXPECT_EQ(b.rec->payloads().at(0), frame);
 }
 
 } // namespace

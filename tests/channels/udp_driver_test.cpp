@@ -40,9 +40,10 @@
 #include <string>
 #include <vector>
 
-#include "actors/runtime/error.hpp"
+#include "channels/error.hpp"
 #include "channels/drivers/udp_addr.hpp"
 #include "channels/link_driver.hpp"
+#include "tests/channels/recorder.hpp"
 
 extern char** environ;
 
@@ -51,6 +52,7 @@ namespace {
 
 using namespace std::chrono_literals;
 using clock_type = std::chrono::steady_clock;
+using test::recorder;
 
 /// Upper bound for anything the tests wait for.
 constexpr auto wait_limit = 5s;
@@ -112,81 +114,6 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
 caf::error send_bytes(link_driver& drv, link_addr dst, const byte_buffer& buf) {
   return drv.send(dst, buf.data(), buf.size(), prio_normal);
 }
-
-// -- recording frame handler ---------------------------------------------------
-
-struct heard_frame {
-  link_addr src;
-  byte_buffer bytes;
-};
-
-struct heard_malformed {
-  link_addr src;
-  std::string why;
-};
-
-/// Records every handler call; thread-safe; waits are bounded.
-class recorder : public frame_handler {
-public:
-  void on_frame(link_addr src, const uint8_t* data, size_t size) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    frames_.push_back(heard_frame{src, byte_buffer(data, data + size)});
-    cv_.notify_all();
-  }
-
-  void on_malformed(link_addr src, const char* why) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    malformed_.push_back(heard_malformed{src, why});
-    cv_.notify_all();
-  }
-
-  void on_event(link_event_kind kind, link_addr, std::string detail) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    events_.push_back(std::to_string(static_cast<int>(kind)) + ": " + detail);
-    cv_.notify_all();
-  }
-
-  void on_failure(caf::error reason) override {
-    std::lock_guard<std::mutex> guard{mtx_};
-    failures_.push_back(render(reason));
-    cv_.notify_all();
-  }
-
-  /// Waits until at least `n` frames arrived; false after wait_limit.
-  bool wait_frames(size_t n) {
-    std::unique_lock<std::mutex> guard{mtx_};
-    return cv_.wait_for(guard, wait_limit, [&] { return frames_.size() >= n; });
-  }
-
-  bool wait_malformed(size_t n) {
-    std::unique_lock<std::mutex> guard{mtx_};
-    return cv_.wait_for(guard, wait_limit,
-                        [&] { return malformed_.size() >= n; });
-  }
-
-  std::vector<heard_frame> frames() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return frames_;
-  }
-
-  std::vector<heard_malformed> malformed() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return malformed_;
-  }
-
-  std::vector<std::string> failures() const {
-    std::lock_guard<std::mutex> guard{mtx_};
-    return failures_;
-  }
-
-private:
-  mutable std::mutex mtx_;
-  std::condition_variable cv_;
-  std::vector<heard_frame> frames_;
-  std::vector<heard_malformed> malformed_;
-  std::vector<std::string> events_;
-  std::vector<std::string> failures_;
-};
 
 /// A started driver and what it heard.
 struct station {
@@ -251,13 +178,6 @@ private:
   int fd_ = -1;
   link_addr local_ = 0;
 };
-
-/// A loopback port that was free a moment ago (for configurations that must
-/// name a station's own address before it is opened).
-uint16_t probably_free_port() {
-  raw_socket probe;
-  return probe.ok() ? udp::port_of(probe.local()) : 0;
-}
 
 // -- agent processes -------------------------------------------------------------
 
@@ -786,13 +706,6 @@ private:
 
 // -- registration and addresses ----------------------------------------------------
 
-TEST(udp_driver, is_registered_as_the_udp_link_kind) {
-  auto* kind = find_link_kind("udp");
-  ASSERT_NE(kind, nullptr);
-  EXPECT_STREQ(kind->name, "udp");
-  EXPECT_STREQ(kind->description, "UDP/IPv4 (Ethernet)");
-}
-
 TEST(udp_driver, formats_and_parses_addresses_round_trip) {
   station st;
   ASSERT_EQ(start_station(st, udp_config("eth0", "127.0.0.1:0")), "");
@@ -848,69 +761,6 @@ TEST(udp_driver, resolves_an_ephemeral_port_to_the_bound_address) {
 
 // -- loopback traffic ------------------------------------------------------------
 
-TEST(udp_driver, exchanges_unicast_frames_both_ways_on_loopback) {
-  station a;
-  station b;
-  ASSERT_EQ(start_station(a, udp_config("a", "127.0.0.1:0")), "");
-  ASSERT_EQ(start_station(b, udp_config("b", "127.0.0.1:0")), "");
-  auto to_b = bytes_of("from a to b");
-  auto to_a = pattern(1000, 3);
-  EXPECT_EQ(render(send_bytes(*a.drv, b.drv->local_addr(), to_b)), "none");
-  EXPECT_EQ(render(send_bytes(*b.drv, a.drv->local_addr(), to_a)), "none");
-  ASSERT_TRUE(b.rec->wait_frames(1));
-  ASSERT_TRUE(a.rec->wait_frames(1));
-  auto at_b = b.rec->frames();
-  auto at_a = a.rec->frames();
-  ASSERT_EQ(at_b.size(), 1u);
-  ASSERT_EQ(at_a.size(), 1u);
-  EXPECT_EQ(at_b[0].src, a.drv->local_addr());
-  EXPECT_EQ(at_b[0].bytes, to_b);
-  EXPECT_EQ(at_a[0].src, b.drv->local_addr());
-  EXPECT_EQ(at_a[0].bytes, to_a);
-  EXPECT_TRUE(a.rec->malformed().empty());
-  EXPECT_TRUE(b.rec->failures().empty());
-}
-
-TEST(udp_driver, broadcast_reaches_every_peer_but_not_the_sender) {
-  station b;
-  station c;
-  ASSERT_EQ(start_station(b, udp_config("b", "127.0.0.1:0")), "");
-  ASSERT_EQ(start_station(c, udp_config("c", "127.0.0.1:0")), "");
-  // The sender's own address is in its peers list, as it is when every
-  // module of a segment shares one configuration. Its port is chosen up front
-  // and may be taken by someone else in between: then retry.
-  station a;
-  std::string problem;
-  for (int attempt = 0; attempt < 5; ++attempt) {
-    auto self = "127.0.0.1:" + std::to_string(probably_free_port());
-    auto peers = b.drv->format_addr(b.drv->local_addr()) + ", " + self + ","
-                 + c.drv->format_addr(c.drv->local_addr());
-    problem = start_station(a, udp_config("a", self, {{"peers", peers}}));
-    if (problem.empty())
-      break;
-  }
-  ASSERT_EQ(problem, "");
-  auto hello = bytes_of("hello segment");
-  EXPECT_EQ(render(send_bytes(*a.drv, broadcast_addr, hello)), "none");
-  ASSERT_TRUE(b.rec->wait_frames(1));
-  ASSERT_TRUE(c.rec->wait_frames(1));
-  for (auto* st : {&b, &c}) {
-    auto heard = st->rec->frames();
-    ASSERT_EQ(heard.size(), 1u);
-    EXPECT_EQ(heard[0].src, a.drv->local_addr());
-    EXPECT_EQ(heard[0].bytes, hello);
-  }
-  // The copy a sent to itself was queued before b even heard the broadcast,
-  // so once b's marker arrived, a's own copy would have arrived too.
-  auto marker = bytes_of("marker");
-  EXPECT_EQ(render(send_bytes(*b.drv, a.drv->local_addr(), marker)), "none");
-  ASSERT_TRUE(a.rec->wait_frames(1));
-  auto at_a = a.rec->frames();
-  ASSERT_EQ(at_a.size(), 1u) << "the sender heard its own broadcast";
-  EXPECT_EQ(at_a[0].src, b.drv->local_addr());
-  EXPECT_EQ(at_a[0].bytes, marker);
-}
-
 TEST(udp_driver, broadcast_without_peers_or_broadcast_address_sends_nothing_and_succeeds) {
   station st;
   ASSERT_EQ(start_station(st, udp_config("eth0", "127.0.0.1:0")), "");
@@ -952,7 +802,7 @@ TEST(udp_driver, reports_oversized_and_empty_datagrams_as_malformed_and_keeps_re
   ASSERT_EQ(heard.size(), 1u);
   EXPECT_EQ(heard[0].src, raw.local());
   EXPECT_EQ(heard[0].bytes, pattern(100, 3));
-  auto bad = st.rec->malformed();
+  auto bad = st.rec->malformed_frames();
   ASSERT_EQ(bad.size(), 3u);
   EXPECT_EQ(bad[0].why, "oversized");
   EXPECT_EQ(bad[1].why, "empty");
@@ -1013,24 +863,6 @@ TEST(udp_driver, takes_the_mtu_and_profile_from_options) {
     EXPECT_EQ((*drv)->profile().name, c.profile);
     EXPECT_EQ((*drv)->profile().mtu, c.mtu) << c.profile;
   }
-}
-
-TEST(udp_driver, refuses_frames_above_the_mtu_and_carries_frames_of_exactly_the_mtu) {
-  station a;
-  station b;
-  ASSERT_EQ(start_station(a, udp_config("a", "127.0.0.1:0")), "");
-  ASSERT_EQ(start_station(b, udp_config("b", "127.0.0.1:0")), "");
-  auto err = send_bytes(*a.drv, b.drv->local_addr(), pattern(1473, 0));
-  EXPECT_TRUE(is(err, ec::packet_too_large)) << render(err);
-  EXPECT_NE(render(err).find("1473"), std::string::npos) << render(err);
-  EXPECT_NE(render(err).find("1472"), std::string::npos) << render(err);
-  EXPECT_TRUE(is(send_bytes(*a.drv, broadcast_addr, pattern(1473, 0)),
-                 ec::packet_too_large));
-  EXPECT_EQ(render(send_bytes(*a.drv, b.drv->local_addr(), pattern(1472, 5))), "none");
-  ASSERT_TRUE(b.rec->wait_frames(1));
-  auto heard = b.rec->frames();
-  ASSERT_EQ(heard.size(), 1u);
-  EXPECT_EQ(heard[0].bytes, pattern(1472, 5));
 }
 
 TEST(udp_driver, carries_frames_up_to_the_largest_udp_payload_when_configured) {
