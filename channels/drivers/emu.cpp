@@ -2,46 +2,37 @@
 // (IEEE 1394, USB, CAN without kernel support) and for building topologies
 // across processes on one machine.
 //
-// A medium is a directory. Each station binds an AF_UNIX datagram socket at
-// <dir>/<station>.sock; <dir>/medium is a shared, mmapped state file whose
-// slots hold "medium busy until" times in CLOCK_MONOTONIC ns (system-wide,
-// so every process agrees). A bus shares slot 0 among all stations, a
+// A medium is a directory of stations (channels/drivers/emu_medium.hpp:
+// one AF_UNIX datagram socket <dir>/<station>.sock each). <dir>/medium is
+// the shared, mmapped state file whose slots hold "medium busy until" times
+// in CLOCK_MONOTONIC ns. A bus shares slot 0 among all stations, a
 // point-to-point link gives each of its two stations its own slot (full
-// duplex). Opening a station serializes on flock(<dir>/medium).
+// duplex).
 //
 // Threads per driver: a transmit thread (paces frames, applies loss,
 // duplication, corruption and jitter, sends datagrams) and, after start(), a
-// receive thread (validates datagrams, holds them until their delivery time,
-// watches that the socket file still exists, calls the frame_handler).
+// receive thread (the medium's receive loop: validates datagrams, holds them
+// until their delivery time, watches that the socket file still exists,
+// calls the frame_handler).
 
 #include <algorithm>
 #include <atomic>
-#include <cerrno>
 #include <chrono>
 #include <condition_variable>
+#include <cstddef>
 #include <cstring>
 #include <deque>
 #include <mutex>
 #include <random>
 #include <string>
-#include <system_error>
 #include <thread>
 #include <vector>
 
-#include <dirent.h>
-#include <fcntl.h>
-#include <poll.h>
-#include <sys/eventfd.h>
-#include <sys/file.h>
-#include <sys/mman.h>
 #include <sys/prctl.h>
-#include <sys/socket.h>
-#include <sys/stat.h>
 #include <sys/un.h>
-#include <time.h>
-#include <unistd.h>
 
 #include "channels/error.hpp"
+#include "channels/drivers/emu_medium.hpp"
 #include "channels/drivers/emu_wire.hpp"
 #include "channels/drivers/medium_dir.hpp"
 #include "channels/drivers/posix.hpp"
@@ -52,40 +43,17 @@ namespace herm {
 
 namespace {
 
-using posix::errno_text;
 using posix::now_ns;
-using posix::unique_fd;
-using namespace medium_dir;
+using medium_dir::join_numbers;
+using medium_dir::station_file;
 
-/// Stations of this kind with a socket file in `dir`.
-std::vector<uint64_t> list_stations_in(const std::string& dir) {
-  return list_stations(dir, emu::min_station, emu::max_station);
-}
-
-
-// -- constants -------------------------------------------------------------------
+// -- the medium file -------------------------------------------------------------
 
 constexpr uint32_t medium_magic = 0x48454d55; // "HEMU"
 constexpr uint32_t medium_version = 1;
 constexpr size_t medium_slots = 256;
 
 enum medium_form : uint32_t { form_unset = 0, form_bus = 1, form_p2p = 2 };
-
-/// How often the receive thread checks that its files still exist.
-constexpr int64_t liveness_period_ns = 100'000'000;
-/// Broadcast destinations are rescanned at least this often (and whenever a
-/// station joins or leaves through a driver, see medium_layout::generation).
-constexpr int64_t rescan_period_ns = 100'000'000;
-/// Bound of the back-to-back credit (see emu::transmission_start).
-constexpr int64_t max_credit_ns = 50'000'000;
-/// How long the transmitter waits for a receiver whose socket queue is full
-/// before it drops the frame for that receiver (an overrun).
-constexpr int64_t overrun_wait_ns = 25'000'000;
-/// Frames held by a receiver for later delivery; above this, the earliest is
-/// handed up early rather than dropped.
-constexpr size_t max_held_frames = 4096;
-/// Datagrams read per wake-up before due frames are delivered again.
-constexpr int max_reads_per_wakeup = 64;
 
 /// Layout of <dir>/medium. Lives in MAP_SHARED memory of several processes:
 /// only lock-free atomics, no pointers.
@@ -108,20 +76,18 @@ static_assert(std::atomic<uint32_t>::is_always_lock_free,
 static_assert(sizeof(medium_layout) == 64 + 8 * medium_slots,
               "the medium file layout is part of the wire format");
 
-// -- small helpers ---------------------------------------------------------------
-
-/// Holds flock(LOCK_EX) on the medium file. Unlocks explicitly: the
-/// mapping keeps the open file description alive, so close() alone would
-/// keep the lock until munmap.
-struct medium_lock {
-  unique_fd fd;
-  medium_lock() = default;
-  medium_lock(const medium_lock&) = delete;
-  medium_lock& operator=(const medium_lock&) = delete;
-  ~medium_lock() {
-    if (fd)
-      ::flock(fd.get(), LOCK_UN);
-  }
+const emu_medium::medium_spec medium_spec{
+  "medium",
+  sizeof(medium_layout),
+  medium_magic,
+  medium_version,
+  offsetof(medium_layout, generation),
+  /*self_is_peer=*/false,
+  /*rcvbuf=*/0,
+  /*sndbuf=*/4 << 20,
+  /*rx_thread_name=*/nullptr,
+  {"medium", "an emu medium file", "emulated link socket", "emulated link",
+   "emulated link file", " removed", " removed (replaced)"},
 };
 
 // -- configuration ---------------------------------------------------------------
@@ -222,39 +188,29 @@ caf::expected<emu_config> read_config(const device_config& cfg) {
   return result;
 }
 
+
 // -- the driver ------------------------------------------------------------------
 
-class emu_driver final : public link_driver {
+class emu_driver final : public link_driver, emu_medium::medium_client {
 public:
   explicit emu_driver(emu_config cfg)
     : cfg_(std::move(cfg)),
       prefix_("device '" + cfg_.name + "': "),
-      medium_path_(cfg_.dir + "/medium"),
+      station_(cfg_.dir, prefix_, medium_spec, *this),
       loss_(cfg_.loss),
       latency_ns_(int64_t(cfg_.latency_us) * 1000),
       jitter_ns_(int64_t(cfg_.jitter_us) * 1000),
       bandwidth_(cfg_.profile.bandwidth_bps),
-      rng_(cfg_.seed) {
+      dice_(cfg_.seed) {
   }
 
   ~emu_driver() override {
     stop();
-    if (medium_ != nullptr)
-      ::munmap(medium_, sizeof(medium_layout));
   }
 
-  /// Joins the medium: directory, medium file, station, socket. Starts the
-  /// transmit thread.
+  /// Joins the medium: directory, medium file, station, socket.
   caf::error open() {
-    if (auto err = open_directory())
-      return err;
-    medium_lock lock_fd;
-    if (auto err = open_medium(lock_fd))
-      return err;
-    if (auto err = claim_station())
-      return err;
-    medium_->generation.fetch_add(1);
-    return caf::none; // lock_fd unlocks
+    return station_.open(cfg_.create);
   }
 
   void start_transmitter() {
@@ -272,7 +228,9 @@ public:
     if (rx_thread_.joinable())
       return make_error(ec::already_exists, prefix_ + "already started");
     handler_ = std::move(handler);
-    rx_thread_ = std::thread{[this] { receive_loop(); }};
+    rx_thread_ = std::thread{[this] {
+      station_.receive_loop(emu::wire_header_size + cfg_.profile.mtu);
+    }};
     return caf::none;
   }
 
@@ -286,28 +244,12 @@ public:
       stopping_ = true;
     }
     tx_cv_.notify_all();
-    stopped_rx_.store(true);
-    wake_receiver();
+    station_.request_stop();
     if (tx_thread_.joinable())
       tx_thread_.join();
-    if (rx_thread_.joinable()) {
-      // Calling stop from a handler callback (on the receive thread) would
-      // join the thread with itself; the handler contract forbids blocking
-      // calls there, but do not deadlock: the loop exits when it returns.
-      if (rx_thread_.get_id() == std::this_thread::get_id())
-        rx_thread_.detach();
-      else
-        rx_thread_.join();
-    }
-    // Remove our socket file, unless somebody else's replaced it.
-    struct stat st;
-    if (sock_ino_ != 0 && ::stat(sock_path_.c_str(), &st) == 0
-        && st.st_ino == sock_ino_ && st.st_dev == sock_dev_)
-      ::unlink(sock_path_.c_str());
-    if (medium_ != nullptr)
-      medium_->generation.fetch_add(1);
-    rx_fd_.reset();
-    tx_fd_.reset();
+    // Stop from a handler callback (the handler contract forbids blocking
+    // calls there) must not deadlock: the receive thread is detached then.
+    station_.leave(station_.join_receiver(rx_thread_));
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -322,7 +264,7 @@ public:
       return make_error(ec::invalid_address,
                         prefix_ + "no station " + std::to_string(dst)
                           + " on an emu link (stations are 1..254)");
-    if (failed_.load())
+    if (station_.failed())
       return make_error(ec::device_failed, prefix_ + "the link has failed");
     auto enqueued_at = now_ns();
     std::lock_guard<std::mutex> guard{mtx_};
@@ -351,7 +293,7 @@ public:
   }
 
   link_addr local_addr() const override {
-    return station_;
+    return station_.number();
   }
 
   std::string format_addr(link_addr addr) const override {
@@ -361,16 +303,8 @@ public:
   }
 
   caf::expected<link_addr> parse_addr(const std::string& str) const override {
-    uint64_t n = 0;
-    bool ok = !str.empty() && str.size() <= 3;
-    for (auto c : str) {
-      if (c < '0' || c > '9') {
-        ok = false;
-        break;
-      }
-      n = n * 10 + static_cast<uint64_t>(c - '0');
-    }
-    if (!ok || n < emu::min_station || n > emu::max_station)
+    auto n = medium_dir::parse_number(str, emu::min_station, emu::max_station);
+    if (n == 0)
       return make_error(ec::invalid_address,
                         prefix_ + "'" + str
                           + "' is not an emu station (expected 1..254)");
@@ -425,7 +359,7 @@ public:
     if (key == "corrupt")
       return format_double(cfg_.corrupt);
     if (key == "station")
-      return std::to_string(station_);
+      return std::to_string(station_.number());
     if (key == "form")
       return std::string{cfg_.p2p ? "p2p" : "bus"};
     if (key == "medium")
@@ -436,7 +370,7 @@ public:
     if (key == "tx_lost")
       return std::to_string(tx_lost_.load());
     if (key == "tx_overruns")
-      return std::to_string(tx_overruns_.load());
+      return std::to_string(station_.overruns());
     if (key == "rx_frames")
       return std::to_string(rx_frames_.load());
     if (key == "rx_malformed")
@@ -451,121 +385,30 @@ private:
     std::vector<uint8_t> bytes;
   };
 
-  struct held_frame {
-    int64_t deliver_at = 0;
-    uint64_t seq = 0;
-    link_addr src = 0;
-    std::vector<uint8_t> bytes;
-  };
+  using send_result = emu_medium::station::send_result;
 
-  /// Orders a std::*_heap as a min-heap by (deliver_at, seq).
-  static bool later(const held_frame& x, const held_frame& y) {
-    return x.deliver_at != y.deliver_at ? x.deliver_at > y.deliver_at
-                                        : x.seq > y.seq;
+  medium_layout& medium() const {
+    return *static_cast<medium_layout*>(station_.state());
   }
 
   caf::error fail(ec code, const std::string& what) const {
-    return make_error(code, prefix_ + what);
+    return station_.fail(code, what);
   }
 
-  // -- opening -------------------------------------------------------------------
+  // -- medium_client: joining ----------------------------------------------------
 
-  caf::error open_directory() {
-    struct stat st;
-    if (::stat(cfg_.dir.c_str(), &st) == 0) {
-      if (!S_ISDIR(st.st_mode))
-        return fail(ec::device_unavailable,
-                    "medium path '" + cfg_.dir + "' is not a directory");
-      return caf::none;
-    }
-    auto err = errno;
-    if (err != ENOENT)
-      return fail(ec::device_unavailable, "cannot use medium directory '"
-                                            + cfg_.dir + "': " + errno_text(err));
-    if (!cfg_.create)
-      return fail(ec::device_unavailable,
-                  "medium directory '" + cfg_.dir
-                    + "' does not exist (and option create=false)");
-    if (auto e = make_dirs(cfg_.dir))
-      return fail(ec::device_unavailable, "cannot create medium directory '"
-                                            + cfg_.dir + "': " + errno_text(e));
-    return caf::none;
-  }
-
-  /// Opens, locks, sizes and maps <dir>/medium. The lock stays held in
-  /// `lock_fd` while the station is claimed.
-  caf::error open_medium(medium_lock& lock_fd) {
-    lock_fd.fd.reset(
-      ::open(medium_path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666));
-    auto fd = lock_fd.fd.get();
-    if (fd < 0)
-      return fail(ec::device_unavailable, "cannot open medium file '"
-                                            + medium_path_
-                                            + "': " + errno_text(errno));
-    while (::flock(fd, LOCK_EX) != 0)
-      if (errno != EINTR)
-        return fail(ec::device_unavailable, "cannot lock medium file '"
-                                              + medium_path_
-                                              + "': " + errno_text(errno));
-    struct stat st;
-    if (::fstat(fd, &st) != 0)
-      return fail(ec::device_unavailable, "cannot stat medium file '"
-                                            + medium_path_
-                                            + "': " + errno_text(errno));
-    if (st.st_size == 0 && ::ftruncate(fd, sizeof(medium_layout)) != 0)
-      return fail(ec::device_unavailable, "cannot size medium file '"
-                                            + medium_path_
-                                            + "': " + errno_text(errno));
-    else if (st.st_size != 0 && st.st_size != off_t{sizeof(medium_layout)})
-      return fail(ec::device_unavailable,
-                  "'" + medium_path_ + "' is not an emu medium file ("
-                    + std::to_string(st.st_size) + " bytes, expected "
-                    + std::to_string(sizeof(medium_layout)) + ")");
-    medium_dev_ = st.st_dev;
-    medium_ino_ = st.st_ino;
-    auto* mem = ::mmap(nullptr, sizeof(medium_layout), PROT_READ | PROT_WRITE,
-                       MAP_SHARED, fd, 0);
-    if (mem == MAP_FAILED)
-      return fail(ec::device_unavailable, "cannot map medium file '"
-                                            + medium_path_
-                                            + "': " + errno_text(errno));
-    medium_ = static_cast<medium_layout*>(mem);
-    if (medium_->magic == 0 && medium_->version == 0) {
-      medium_->magic = medium_magic;
-      medium_->version = medium_version;
-    } else if (medium_->magic != medium_magic) {
-      return fail(ec::device_unavailable,
-                  "'" + medium_path_ + "' is not an emu medium file");
-    } else if (medium_->version != medium_version) {
-      return fail(ec::device_unavailable,
-                  "medium file '" + medium_path_ + "' has version "
-                    + std::to_string(medium_->version)
-                    + ", this driver speaks version "
-                    + std::to_string(medium_version));
-    }
-    return caf::none;
-  }
-
-  /// Picks the station number, checks the medium's form and binds the
-  /// socket. Runs under the medium lock.
-  caf::error claim_station() {
-    std::vector<uint64_t> live;
-    std::vector<uint64_t> stale;
-    for (auto n : list_stations_in(cfg_.dir)) {
-      switch (probe_socket(cfg_.dir + "/" + station_file(n))) {
-        case probe_result::live: live.push_back(n); break;
-        case probe_result::stale: stale.push_back(n); break;
-        case probe_result::absent: break;
-      }
-    }
+  /// Checks the medium's form and picks the station number.
+  caf::expected<uint64_t> admit(void* state,
+                                const std::vector<uint64_t>& live) override {
+    auto& m = *static_cast<medium_layout*>(state);
     auto my_form = cfg_.p2p ? form_p2p : form_bus;
     if (live.empty()) {
       // First station on the medium: it defines the form, and busy times
       // left behind by earlier users (maybe at another bandwidth) go away.
-      medium_->form.store(my_form);
-      for (auto& slot : medium_->busy_until)
+      m.form.store(my_form);
+      for (auto& slot : m.busy_until)
         slot.store(0);
-    } else if (medium_->form.load() != my_form) {
+    } else if (m.form.load() != my_form) {
       return fail(ec::device_unavailable,
                   "medium '" + cfg_.dir + "' is in use as a "
                     + (cfg_.p2p ? "bus" : "point-to-point link")
@@ -582,68 +425,28 @@ private:
     auto is_live = [&](uint64_t n) {
       return std::find(live.begin(), live.end(), n) != live.end();
     };
+    uint64_t station = 0;
     if (cfg_.station != 0) {
       if (is_live(cfg_.station))
-        return fail(ec::already_exists,
-                    "station " + std::to_string(cfg_.station)
-                      + " is already taken on medium '" + cfg_.dir + "'");
-      station_ = cfg_.station;
+        return fail(ec::already_exists, taken(cfg_.station));
+      station = cfg_.station;
     } else {
-      for (auto n = emu::min_station; n <= emu::max_station && station_ == 0;
+      for (auto n = emu::min_station; n <= emu::max_station && station == 0;
            ++n)
         if (!is_live(n))
-          station_ = n;
-      if (station_ == 0)
+          station = n;
+      if (station == 0)
         return fail(ec::device_unavailable,
                     "medium '" + cfg_.dir + "' has no free station");
     }
-    sock_path_ = cfg_.dir + "/" + station_file(station_);
-    if (std::find(stale.begin(), stale.end(), station_) != stale.end())
-      ::unlink(sock_path_.c_str()); // left behind by a dead process
     if (cfg_.p2p)
-      medium_->busy_until[station_].store(0);
-    // Receive socket: bound, non-blocking.
-    rx_fd_.reset(
-      ::socket(AF_UNIX, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
-    if (!rx_fd_)
-      return fail(ec::device_unavailable,
-                  "cannot create socket: " + errno_text(errno));
-    auto addr = unix_addr(sock_path_);
-    if (::bind(rx_fd_.get(), reinterpret_cast<sockaddr*>(&addr), sizeof(addr))
-        != 0) {
-      auto err = errno;
-      if (err == EADDRINUSE)
-        return fail(ec::already_exists,
-                    "station " + std::to_string(station_)
-                      + " is already taken on medium '" + cfg_.dir + "' ("
-                      + sock_path_ + " exists)");
-      return fail(ec::device_unavailable,
-                  "cannot bind " + sock_path_ + ": " + errno_text(err));
-    }
-    struct stat st;
-    if (::stat(sock_path_.c_str(), &st) != 0)
-      return fail(ec::device_unavailable, "cannot stat " + sock_path_ + ": "
-                                            + errno_text(errno));
-    sock_dev_ = st.st_dev;
-    sock_ino_ = st.st_ino;
-    // Transmit socket: blocking with a send timeout, so a receiver whose
-    // queue is full (net.unix.max_dgram_qlen is small) gets a short grace
-    // period before its frame counts as an overrun.
-    tx_fd_.reset(::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0));
-    if (!tx_fd_)
-      return fail(ec::device_unavailable,
-                  "cannot create socket: " + errno_text(errno));
-    timeval tv{0, overrun_wait_ns / 1000};
-    ::setsockopt(tx_fd_.get(), SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof(tv));
-    int sndbuf = 4 << 20; // best effort; capped at net.core.wmem_max
-    ::setsockopt(tx_fd_.get(), SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof(sndbuf));
-    wake_fd_.reset(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK));
-    if (!wake_fd_)
-      return fail(ec::device_unavailable,
-                  "cannot create eventfd: " + errno_text(errno));
-    for (auto n = emu::min_station; n <= emu::max_station; ++n)
-      peer_addrs_[n] = unix_addr(cfg_.dir + "/" + station_file(n));
-    return caf::none;
+      m.busy_until[station].store(0);
+    return station;
+  }
+
+  std::string taken(uint64_t station) const override {
+    return "station " + std::to_string(station)
+           + " is already taken on medium '" + cfg_.dir + "'";
   }
 
   // -- transmit thread -----------------------------------------------------------
@@ -651,7 +454,7 @@ private:
   void transmit_loop() {
     ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0); // precise wake-ups
     std::vector<uint8_t> buf(emu::wire_header_size + cfg_.profile.mtu);
-    auto& slot = medium_->busy_until[cfg_.p2p ? station_ : 0];
+    auto& slot = medium().busy_until[cfg_.p2p ? station_.number() : 0];
     std::unique_lock<std::mutex> lk{mtx_};
     for (;;) {
       tx_idle_ = true;
@@ -662,18 +465,10 @@ private:
       auto f = std::move(queue_.front());
       queue_.pop_front();
       lk.unlock();
-      // Reserve medium time. Reservations never overlap: each one starts at
-      // or after the busy time it replaces.
-      auto ft = emu::frame_time_ns(f.bytes.size(),
-                                   cfg_.profile.frame_overhead_bits,
-                                   bandwidth_.load());
-      auto busy = slot.load();
-      int64_t end = 0;
-      do {
-        end = emu::transmission_start(busy, f.enqueued_at, now_ns(),
-                                      max_credit_ns)
-              + ft;
-      } while (!slot.compare_exchange_weak(busy, end));
+      auto frame_ns = emu::frame_time_ns(f.bytes.size(),
+                                         cfg_.profile.frame_overhead_bits,
+                                         bandwidth_.load());
+      auto end = emu_medium::reserve(slot, f.enqueued_at, frame_ns, now_ns);
       // Wait for the end of transmission on an absolute deadline, so errors
       // do not add up; stop() interrupts.
       lk.lock();
@@ -684,7 +479,7 @@ private:
       if (stopping_)
         return;
       lk.unlock();
-      if (!failed_.load() && !transmit(f, end, buf))
+      if (!station_.failed() && !transmit(f, end, buf))
         return;
       lk.lock();
       if (spare_.size() < std::min<uint64_t>(cfg_.queue, 64))
@@ -696,330 +491,99 @@ private:
   bool transmit(const tx_frame& f, int64_t end, std::vector<uint8_t>& buf) {
     ++tx_frames_;
     if (f.dst != broadcast_addr)
-      return f.dst == station_
+      return f.dst == station_.number()
              || transmit_to(f.dst, f, end, buf, 0) != send_result::fatal;
-    refresh_peers();
-    for (size_t i = 0; i < peers_.size();) {
-      auto result = transmit_to(peers_[i], f, end, buf, emu::flag_broadcast);
-      if (result == send_result::fatal)
-        return false;
-      if (result == send_result::gone)
-        peers_.erase(peers_.begin() + static_cast<ptrdiff_t>(i));
-      else
-        ++i;
-    }
-    return true;
+    return station_.for_each_peer([&](uint64_t peer) {
+      return transmit_to(peer, f, end, buf, emu::flag_broadcast);
+    });
   }
 
-  enum class send_result { ok, gone, fatal };
-
+  /// Sends the copies of `f` that reach `dst` (loss, duplication,
+  /// corruption, latency and jitter decided per receiver).
   send_result transmit_to(uint64_t dst, const tx_frame& f, int64_t end,
                           std::vector<uint8_t>& buf, uint8_t flags) {
-    std::uniform_real_distribution<double> coin{0.0, 1.0};
-    auto loss = loss_.load();
-    if (loss > 0 && coin(rng_) < loss) {
+    emu_medium::impairments imp;
+    imp.loss = loss_.load();
+    imp.duplicate = cfg_.duplicate;
+    imp.corrupt = cfg_.corrupt;
+    imp.latency_ns = latency_ns_.load();
+    imp.jitter_ns = jitter_ns_.load();
+    auto copies = emu_medium::copies(dice_, imp);
+    if (copies == 0) {
       ++tx_lost_;
       return send_result::ok;
     }
-    int copies = cfg_.duplicate > 0 && coin(rng_) < cfg_.duplicate ? 2 : 1;
-    auto latency = latency_ns_.load();
-    auto jitter = jitter_ns_.load();
     auto size = f.bytes.size();
     for (int copy = 0; copy < copies; ++copy) {
+      auto fate = emu_medium::fate_of_copy(dice_, imp, end, size);
       emu::wire_header hdr;
       hdr.flags = static_cast<uint8_t>(flags
                                        | (copy > 0 ? emu::flag_duplicate : 0));
-      hdr.src = static_cast<uint16_t>(station_);
-      hdr.deliver_at_ns = end + latency;
-      if (jitter > 0)
-        hdr.deliver_at_ns
-          += std::uniform_int_distribution<int64_t>{0, jitter}(rng_);
+      hdr.src = static_cast<uint16_t>(station_.number());
+      hdr.deliver_at_ns = fate.deliver_at_ns;
       if (size > 0)
         std::memcpy(buf.data() + emu::wire_header_size, f.bytes.data(), size);
-      if (size > 0 && cfg_.corrupt > 0 && coin(rng_) < cfg_.corrupt) {
-        auto bit = std::uniform_int_distribution<size_t>{0, size * 8 - 1}(rng_);
+      if (fate.flipped_bit >= 0) {
+        auto bit = static_cast<size_t>(fate.flipped_bit);
         buf[emu::wire_header_size + bit / 8] ^= uint8_t(1u << (bit % 8));
         hdr.flags |= emu::flag_corrupted;
       }
       emu::encode(hdr, buf.data());
-      auto result = send_datagram(dst, buf.data(),
-                                  emu::wire_header_size + size);
+      auto result = station_.send_to(dst, buf.data(),
+                                     emu::wire_header_size + size);
       if (result != send_result::ok)
         return result;
     }
     return send_result::ok;
   }
 
-  send_result send_datagram(uint64_t dst, const uint8_t* data, size_t size) {
-    auto& addr = peer_addrs_[dst];
-    // A receiver that already overran once gets no grace period until it
-    // takes a frame again: a stuck station must not stall the whole bus.
-    int flags = MSG_NOSIGNAL | (congested_[dst] ? MSG_DONTWAIT : 0);
-    for (;;) {
-      if (::sendto(tx_fd_.get(), data, size, flags,
-                   reinterpret_cast<const sockaddr*>(&addr), sizeof(addr))
-          >= 0) {
-        congested_[dst] = false;
-        return send_result::ok;
-      }
-      auto err = errno;
-      switch (err) {
-        case EINTR:
-          continue;
-        case EAGAIN:
-        case ENOBUFS:
-        case ENOMEM:
-          // Receiver overrun: the frame is lost for this receiver.
-          ++tx_overruns_;
-          congested_[dst] = true;
-          return send_result::ok;
-        case ENOENT:
-        case ECONNREFUSED:
-        case ENOTDIR:
-          // Nobody there (any more): a medium just carries the frame nowhere.
-          return send_result::gone;
-        case EACCES:
-        case EPERM:
-          return send_result::ok; // somebody else's socket: not for us
-        default:
-          report_tx_failure(fail(ec::device_failed,
-                                 "cannot send on emulated link " + cfg_.dir
-                                   + ": " + errno_text(err)));
-          return send_result::fatal;
-      }
+  // -- medium_client: receive thread ---------------------------------------------
+
+  bool accept(const uint8_t* data, size_t size, int64_t now,
+              int64_t& deliver_at) override {
+    emu::wire_header hdr;
+    hdr.src = 0;
+    auto status = emu::check(data, size, cfg_.profile.mtu, now, hdr);
+    if (status != emu::wire_status::ok) {
+      ++rx_malformed_;
+      auto src = hdr.src >= emu::min_station && hdr.src <= emu::max_station
+                   ? link_addr{hdr.src}
+                   : link_addr{0};
+      auto why = std::string{"emu: "} + emu::to_string(status) + " ("
+                 + std::to_string(size) + "-byte datagram, MTU "
+                 + std::to_string(cfg_.profile.mtu) + ")";
+      handler_->on_malformed(src, why.c_str());
+      return false;
     }
-  }
-
-  /// Rescans the broadcast destinations when a station joined or left, or
-  /// every rescan_period_ns (stations of crashed processes).
-  void refresh_peers() {
-    auto gen = medium_->generation.load();
-    auto now = now_ns();
-    if (peers_valid_ && gen == peers_generation_
-        && now - peers_scanned_at_ < rescan_period_ns)
-      return;
-    peers_ = list_stations_in(cfg_.dir);
-    peers_.erase(std::remove(peers_.begin(), peers_.end(), station_),
-                 peers_.end());
-    peers_valid_ = true;
-    peers_generation_ = gen;
-    peers_scanned_at_ = now;
-  }
-
-  void report_tx_failure(caf::error err) {
-    {
-      std::lock_guard<std::mutex> guard{failure_mtx_};
-      if (!tx_failure_)
-        tx_failure_ = std::move(err);
+    if ((hdr.flags & emu::flag_corrupted) != 0 && cfg_.frame_check) {
+      // The receiving interface's frame check fails: the frame never
+      // reaches software, as on the real medium.
+      ++rx_malformed_;
+      handler_->on_malformed(hdr.src,
+                             "emu: frame check failed (a bit was flipped "
+                             "on the medium)");
+      return false;
     }
-    failed_.store(true);
-    wake_receiver();
-  }
-
-  void wake_receiver() {
-    if (wake_fd_) {
-      uint64_t one = 1;
-      [[maybe_unused]] auto n = ::write(wake_fd_.get(), &one, sizeof(one));
-    }
-  }
-
-  // -- receive thread ------------------------------------------------------------
-
-  void receive_loop() {
-    ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0);
-    std::vector<uint8_t> buf(emu::wire_header_size + cfg_.profile.mtu);
-    auto next_check = now_ns() + liveness_period_ns;
-    for (;;) {
-      if (stopping_rx())
-        return;
-      auto now = now_ns();
-      deliver_due(now);
-      if (stopping_rx())
-        return;
-      if (now >= next_check) {
-        if (auto err = check_files()) {
-          report_failure(std::move(err));
-          return;
-        }
-        next_check = now + liveness_period_ns;
-      }
-      if (auto err = take_tx_failure()) {
-        report_failure(std::move(err));
-        return;
-      }
-      auto wake_at = next_check;
-      if (!held_.empty())
-        wake_at = std::min(wake_at, held_.front().deliver_at);
-      auto wait = std::max<int64_t>(0, wake_at - now);
-      timespec ts{static_cast<time_t>(wait / 1'000'000'000),
-                  static_cast<long>(wait % 1'000'000'000)};
-      pollfd fds[2] = {{rx_fd_.get(), POLLIN, 0}, {wake_fd_.get(), POLLIN, 0}};
-      auto rc = ::ppoll(fds, 2, &ts, nullptr);
-      if (rc < 0) {
-        if (errno == EINTR)
-          continue;
-        report_failure(fail(ec::device_failed,
-                            "cannot poll emulated link socket " + sock_path_
-                              + ": " + errno_text(errno)));
-        return;
-      }
-      if (fds[1].revents != 0) {
-        uint64_t count;
-        [[maybe_unused]] auto n = ::read(wake_fd_.get(), &count, sizeof(count));
-      }
-      if (fds[0].revents != 0 && !read_datagrams(buf))
-        return;
-    }
-  }
-
-  bool stopping_rx() const {
-    return stopped_rx_.load();
-  }
-
-  /// Reads what is queued on the socket. False after a fatal error.
-  bool read_datagrams(std::vector<uint8_t>& buf) {
-    for (int i = 0; i < max_reads_per_wakeup; ++i) {
-      auto n = ::recv(rx_fd_.get(), buf.data(), buf.size(),
-                      MSG_DONTWAIT | MSG_TRUNC);
-      if (n < 0) {
-        auto err = errno;
-        if (err == EAGAIN || err == EWOULDBLOCK)
-          return true;
-        if (err == EINTR)
-          continue;
-        report_failure(fail(ec::device_failed,
-                            "cannot receive on emulated link socket "
-                              + sock_path_ + ": " + errno_text(err)));
-        return false;
-      }
-      auto size = static_cast<size_t>(n); // the real size (MSG_TRUNC)
-      auto now = now_ns();
-      emu::wire_header hdr;
-      hdr.src = 0;
-      auto status = emu::check(buf.data(), size, cfg_.profile.mtu, now, hdr);
-      if (status != emu::wire_status::ok) {
-        ++rx_malformed_;
-        auto src = hdr.src >= emu::min_station && hdr.src <= emu::max_station
-                     ? link_addr{hdr.src}
-                     : link_addr{0};
-        auto why = std::string{"emu: "} + emu::to_string(status) + " ("
-                   + std::to_string(size) + "-byte datagram, MTU "
-                   + std::to_string(cfg_.profile.mtu) + ")";
-        handler_->on_malformed(src, why.c_str());
-        if (stopping_rx())
-          return true;
-        continue;
-      }
-      if ((hdr.flags & emu::flag_corrupted) != 0 && cfg_.frame_check) {
-        // The receiving interface's frame check fails: the frame never
-        // reaches software, as on the real medium.
-        ++rx_malformed_;
-        handler_->on_malformed(hdr.src,
-                               "emu: frame check failed (a bit was flipped "
-                               "on the medium)");
-        if (stopping_rx())
-          return true;
-        continue;
-      }
-      auto payload = buf.data() + emu::wire_header_size;
-      auto payload_size = size - emu::wire_header_size;
-      if (held_.empty() && hdr.deliver_at_ns <= now) {
-        deliver(hdr.src, payload, payload_size);
-        if (stopping_rx())
-          return true;
-        continue;
-      }
-      if (held_.size() >= max_held_frames) {
-        // Overloaded: hand the earliest up early rather than lose it.
-        deliver_front();
-        if (stopping_rx())
-          return true;
-      }
-      held_frame h;
-      if (!spare_rx_.empty()) {
-        h.bytes = std::move(spare_rx_.back());
-        spare_rx_.pop_back();
-      }
-      h.bytes.assign(payload, payload + payload_size);
-      h.deliver_at = hdr.deliver_at_ns;
-      h.seq = rx_seq_++;
-      h.src = hdr.src;
-      held_.push_back(std::move(h));
-      std::push_heap(held_.begin(), held_.end(), later);
-    }
+    deliver_at = hdr.deliver_at_ns;
     return true;
   }
 
-  void deliver_due(int64_t now) {
-    while (!held_.empty() && held_.front().deliver_at <= now
-           && !stopping_rx())
-      deliver_front();
-  }
-
-  void deliver_front() {
-    std::pop_heap(held_.begin(), held_.end(), later);
-    auto h = std::move(held_.back());
-    held_.pop_back();
-    deliver(h.src, h.bytes.data(), h.bytes.size());
-    if (spare_rx_.size() < 64)
-      spare_rx_.push_back(std::move(h.bytes));
-  }
-
-  void deliver(link_addr src, const uint8_t* data, size_t size) {
+  void deliver(const uint8_t* data, size_t size) override {
+    auto hdr = emu::decode(data);
     ++rx_frames_;
-    handler_->on_frame(src, data, size);
+    handler_->on_frame(hdr.src, data + emu::wire_header_size,
+                       size - emu::wire_header_size);
   }
 
-  /// Non-null when our socket file or the medium file is gone or replaced.
-  caf::error check_files() const {
-    struct stat st;
-    auto check = [&](const std::string& path, dev_t dev,
-                     ino_t ino) -> caf::error {
-      if (::stat(path.c_str(), &st) == 0) {
-        if (st.st_dev == dev && st.st_ino == ino)
-          return caf::none;
-        return fail(ec::device_failed,
-                    "emulated link file " + path + " removed (replaced)");
-      }
-      auto err = errno;
-      if (err == ENOENT || err == ENOTDIR)
-        return fail(ec::device_failed,
-                    "emulated link file " + path + " removed");
-      return fail(ec::device_failed, "cannot check emulated link file " + path
-                                        + ": " + errno_text(err));
-    };
-    if (auto err = check(sock_path_, sock_dev_, sock_ino_))
-      return err;
-    return check(medium_path_, medium_dev_, medium_ino_);
-  }
-
-  caf::error take_tx_failure() {
-    std::lock_guard<std::mutex> guard{failure_mtx_};
-    return std::exchange(tx_failure_, caf::error{});
-  }
-
-  /// Reports a fatal error once; the receive thread ends right after.
-  void report_failure(caf::error err) {
-    failed_.store(true);
-    if (!stopping_rx())
-      handler_->on_failure(std::move(err));
+  void fail(caf::error err) override {
+    handler_->on_failure(std::move(err));
   }
 
   // -- state ---------------------------------------------------------------------
 
   const emu_config cfg_;
   const std::string prefix_; // "device 'NAME': "
-  const std::string medium_path_;
-  std::string sock_path_;
-  link_addr station_ = 0;
-  medium_layout* medium_ = nullptr;
-  dev_t medium_dev_ = 0;
-  ino_t medium_ino_ = 0;
-  dev_t sock_dev_ = 0;
-  ino_t sock_ino_ = 0;
-  unique_fd rx_fd_;
-  unique_fd tx_fd_;
-  unique_fd wake_fd_;
+  emu_medium::station station_;
 
   // Run-time parameters (set_param).
   std::atomic<double> loss_;
@@ -1030,9 +594,6 @@ private:
   // Lifecycle.
   std::mutex lifecycle_mtx_;
   bool stopped_ = false;
-  std::atomic<bool> failed_{false};
-  /// Set by stop(): the receive thread calls the handler no more.
-  std::atomic<bool> stopped_rx_{false};
   std::shared_ptr<frame_handler> handler_;
   std::thread tx_thread_;
   std::thread rx_thread_;
@@ -1046,27 +607,11 @@ private:
   bool tx_idle_ = false;
 
   // Transmit thread only.
-  std::mt19937_64 rng_;
-  sockaddr_un peer_addrs_[emu::max_station + 1] = {};
-  bool congested_[emu::max_station + 1] = {};
-  std::vector<uint64_t> peers_;
-  bool peers_valid_ = false;
-  uint32_t peers_generation_ = 0;
-  int64_t peers_scanned_at_ = 0;
-
-  // Failure handed from the transmit thread to the receive thread.
-  std::mutex failure_mtx_;
-  caf::error tx_failure_;
-
-  // Receive thread only.
-  std::vector<held_frame> held_;
-  std::vector<std::vector<uint8_t>> spare_rx_;
-  uint64_t rx_seq_ = 0;
+  emu_medium::dice dice_;
 
   // Counters (get_param).
   std::atomic<uint64_t> tx_frames_{0};
   std::atomic<uint64_t> tx_lost_{0};
-  std::atomic<uint64_t> tx_overruns_{0};
   std::atomic<uint64_t> rx_frames_{0};
   std::atomic<uint64_t> rx_malformed_{0};
 };

@@ -29,6 +29,18 @@ uint64_t parse_station_file(const char* name, uint64_t min, uint64_t max) {
   return n >= min && n <= max ? n : 0;
 }
 
+uint64_t parse_number(const std::string& str, uint64_t min, uint64_t max) {
+  if (str.empty() || str.size() > 3)
+    return 0;
+  uint64_t n = 0;
+  for (auto c : str) {
+    if (c < '0' || c > '9')
+      return 0;
+    n = n * 10 + static_cast<uint64_t>(c - '0');
+  }
+  return n >= min && n <= max ? n : 0;
+}
+
 sockaddr_un unix_addr(const std::string& path) {
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;

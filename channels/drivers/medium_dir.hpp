@@ -19,6 +19,10 @@ std::string station_file(uint64_t station);
 /// digits); 0 for anything else.
 uint64_t parse_station_file(const char* name, uint64_t min, uint64_t max);
 
+/// Parses an address as people write it: 1 to 3 decimal digits (leading
+/// zeros allowed) naming a number in [min, max]; 0 for anything else.
+uint64_t parse_number(const std::string& str, uint64_t min, uint64_t max);
+
 /// The socket address of a path (truncated to sun_path).
 sockaddr_un unix_addr(const std::string& path);
 

@@ -1,0 +1,589 @@
+// The emulated CAN bus: the backend of link kind "can" for interface
+// "emu:/path/to/bus-directory", for hosts without CAN. An emulated medium
+// (channels/drivers/emu_medium.hpp): stations in any number of processes,
+// each with a unix datagram socket <dir>/<node>.sock, and a shared mmapped
+// file <dir>/bus holding the bus state: "busy until" (CLOCK_MONOTONIC ns)
+// and one slot per node in which a station publishes the arbitration key
+// and ready time of the frame it wants to send next. Arbitration: when the
+// bus is idle, the frames that were ready at the first moment the bus was
+// idle with something to send compete, and only the station with the
+// lowest identifier among them may take the bus, by compare-and-swap of
+// "busy until" (so exactly one station wins an idle period, and bus time is
+// never handed out twice). The winner sends the frame (struct can_frame /
+// canfd_frame bytes behind a small header, can_emu_wire.hpp) to every other
+// station with the time its transmission ends; receivers hold frames until
+// then, so all hear the bus in one order, and filter by destination like a
+// controller. Frame times are real CAN frame lengths at the configured bit
+// rate (can::frame_bits). See transmit_loop and docs/protocol.md.
+//
+// Threads: a transmit thread (arbitration, pacing, fan-out) and, after
+// start(), the medium's receive thread. send() never blocks beyond a mutex;
+// the frame_handler is called from the receive thread only, and on_failure
+// at most once.
+
+#include "channels/drivers/can_emu.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <cstring>
+#include <mutex>
+#include <string>
+#include <system_error>
+#include <thread>
+#include <vector>
+
+#include <sys/prctl.h>
+
+#include <linux/can.h>
+#include <linux/can/error.h>
+
+#include "channels/drivers/can_emu_wire.hpp"
+#include "channels/drivers/can_id.hpp"
+#include "channels/drivers/emu_medium.hpp"
+#include "channels/drivers/medium_dir.hpp"
+#include "channels/drivers/posix.hpp"
+#include "channels/error.hpp"
+#include "channels/options.hpp"
+
+namespace herm::can {
+
+namespace {
+
+using posix::now_ns;
+using medium_dir::join_numbers;
+using send_result = emu_medium::station::send_result;
+
+// -- constants -------------------------------------------------------------------
+
+/// Slots of the bus file, indexed by node id.
+constexpr size_t bus_slots = 256;
+constexpr uint32_t bus_magic = 0x4E414348; // "HCAN"
+constexpr uint32_t bus_version = 1;
+
+/// A station waiting for the bus refreshes its heartbeat at least this often.
+constexpr int64_t heartbeat_period_ns = 100'000'000;
+/// A published frame whose station has not shown a heartbeat for this long
+/// belongs to a dead or stopped process: arbitration ignores it.
+constexpr int64_t stale_ns = 1'000'000'000;
+/// How long a station that lost arbitration naps before looking again (the
+/// winner takes the bus within microseconds).
+constexpr int64_t backoff_ns = 20'000;
+/// Bits an error frame adds after a destroyed frame: error flag (6) plus
+/// superposition (6), delimiter (8), intermission (3).
+constexpr uint32_t error_frame_bits = 23;
+
+std::chrono::steady_clock::time_point to_time_point(int64_t ns) {
+  // libstdc++'s steady_clock is CLOCK_MONOTONIC.
+  return std::chrono::steady_clock::time_point{std::chrono::nanoseconds{ns}};
+}
+
+// -- emulated bus: shared state ----------------------------------------------------
+
+/// What a station wants to send next. Written by its own transmit path only.
+struct bus_slot {
+  /// 0: nothing; else 1 << 32 | can::arbitration_key of the frame.
+  std::atomic<uint64_t> pending;
+  /// When that frame was handed to the driver, CLOCK_MONOTONIC ns.
+  std::atomic<int64_t> ready_at;
+  /// Last sign of life of the station's transmit path, CLOCK_MONOTONIC ns.
+  std::atomic<int64_t> heartbeat;
+  std::atomic<int64_t> reserved;
+};
+
+/// Layout of <dir>/bus. Lives in MAP_SHARED memory of several processes:
+/// only lock-free atomics, no pointers.
+struct bus_layout {
+  uint32_t magic;
+  uint32_t version;
+  /// Bit rate of the stations on the bus, bit/s.
+  std::atomic<uint64_t> bitrate;
+  /// Bumped whenever a station binds or unbinds, so transmitters rescan.
+  std::atomic<uint32_t> generation;
+  uint32_t reserved0;
+  uint8_t reserved[40];
+  /// The bus is occupied until then, CLOCK_MONOTONIC ns. Only grows.
+  std::atomic<int64_t> busy_until;
+  uint8_t reserved1[56];
+  bus_slot slots[bus_slots];
+};
+
+static_assert(std::atomic<int64_t>::is_always_lock_free,
+              "the bus file needs address-free 64-bit atomics");
+static_assert(std::atomic<uint64_t>::is_always_lock_free,
+              "the bus file needs address-free 64-bit atomics");
+static_assert(std::atomic<uint32_t>::is_always_lock_free,
+              "the bus file needs address-free 32-bit atomics");
+static_assert(sizeof(bus_slot) == 32, "the bus file layout is shared");
+static_assert(sizeof(bus_layout) == 128 + 32 * bus_slots,
+              "the bus file layout is shared");
+
+
+const emu_medium::medium_spec bus_spec{
+  "bus",
+  sizeof(bus_layout),
+  bus_magic,
+  bus_version,
+  offsetof(bus_layout, generation),
+  /*self_is_peer=*/true, // error frames reach the sender too
+  /*rcvbuf=*/1 << 20,
+  /*sndbuf=*/0,
+  /*rx_thread_name=*/"herm-can-emu",
+  {"bus", "an emulated CAN bus file", "emulated CAN socket",
+   "emulated CAN bus", "emulated CAN bus file", " was removed",
+   " was replaced"},
+};
+
+// -- the driver ------------------------------------------------------------------
+
+class emu_can_driver final : public can_driver, emu_medium::medium_client {
+public:
+  explicit emu_can_driver(can_config cfg)
+    : can_driver(std::move(cfg)),
+      station_(cfg_.interface, prefix_, bus_spec, *this),
+      loss_(cfg_.loss),
+      error_rate_(cfg_.error_rate),
+      dice_(cfg_.seed) {
+  }
+
+  ~emu_can_driver() override {
+    stop();
+  }
+
+  /// Joins the bus: directory, bus file, station socket.
+  caf::error open() {
+    return station_.open(cfg_.create);
+  }
+
+
+  caf::error start_transmitter() {
+    try {
+      tx_thread_ = std::thread{[this] { transmit_loop(); }};
+    } catch (const std::system_error& ex) {
+      return fail(ec::device_unavailable,
+                  std::string{"cannot start the transmit thread: "}
+                    + ex.what());
+    }
+    return caf::none;
+  }
+
+  // -- link_driver ---------------------------------------------------------------
+
+  caf::error start(std::shared_ptr<frame_handler> handler) override {
+    std::lock_guard<std::mutex> guard{life_mtx_};
+    if (!handler)
+      return fail(ec::invalid_parameter, "start needs a frame handler");
+    if (stopped_)
+      return fail(ec::device_unavailable, "already stopped");
+    if (rx_thread_.joinable())
+      return fail(ec::device_unavailable, "already started");
+    handler_ = std::move(handler);
+    try {
+      rx_thread_ = std::thread{[this] {
+        station_.receive_loop(wire::header_size + CANFD_MTU);
+      }};
+    } catch (const std::system_error& ex) {
+      handler_.reset();
+      return fail(ec::device_unavailable,
+                  std::string{"cannot start the receive thread: "} + ex.what());
+    }
+    return caf::none;
+  }
+
+  void stop() override {
+    std::lock_guard<std::mutex> guard{life_mtx_};
+    if (stopped_)
+      return;
+    stopped_ = true;
+    {
+      std::lock_guard<std::mutex> lk{mtx_};
+      stopping_ = true;
+    }
+    tx_cv_.notify_all();
+    station_.request_stop();
+    if (tx_thread_.joinable())
+      tx_thread_.join();
+    // Called from a handler, the receive thread is detached: the loop ends
+    // after this callback; the receive socket and the handler stay until
+    // destruction.
+    auto detached = station_.join_receiver(rx_thread_);
+    if (station_.state() != nullptr) {
+      auto& me = bus().slots[cfg_.node];
+      me.pending.store(0);
+      me.heartbeat.store(0);
+    }
+    station_.leave(detached);
+    if (!detached)
+      handler_.reset();
+  }
+
+
+  caf::error send(link_addr dst, const uint8_t* data, size_t size,
+                  uint8_t priority) override {
+    tx_frame f;
+    auto n = build(dst, data, size, priority, f.frame);
+    if (!n)
+      return n.error();
+    if (station_.failed())
+      return fail(ec::device_failed, "the bus has failed");
+    f.wire_size = *n;
+    f.key = can::arbitration_key(f.frame.can_id);
+    f.order = std::min(priority, can::max_priority);
+    f.bits = can::frame_bits(cfg_.format, f.frame.len, cfg_.stuffing);
+    f.enqueued_at = now_ns();
+    std::lock_guard<std::mutex> guard{mtx_};
+    if (stopping_)
+      return fail(ec::device_failed, "the device is stopped");
+    if (queue_.size() >= cfg_.queue)
+      return fail(ec::queue_full, "transmit queue full ("
+                                    + std::to_string(cfg_.queue)
+                                    + " frames)");
+    f.seq = next_seq_++;
+    queue_.push_back(f);
+    std::push_heap(queue_.begin(), queue_.end(), later);
+    // Published before send() returns: from now on, the frame takes part
+    // in every arbitration on the bus.
+    publish(queue_.front());
+    if (tx_idle_)
+      tx_cv_.notify_one();
+    return caf::none;
+  }
+
+  caf::error set_param(const std::string& key,
+                       const std::string& value) override {
+    device_config tmp{cfg_.name, "can", emu_scheme + cfg_.interface,
+                      {{key, value}}};
+    option_reader r{tmp};
+    if (key == "loss") {
+      auto x = r.real(key, 0, 0, 1);
+      if (!x)
+        return x.error();
+      loss_.store(*x);
+      return caf::none;
+    }
+    if (key == "error_rate") {
+      auto x = r.real(key, 0, 0, 0.9);
+      if (!x)
+        return x.error();
+      error_rate_.store(*x);
+      return caf::none;
+    }
+    return fail(ec::invalid_parameter,
+                "parameter '" + key
+                  + "' cannot be changed on an emulated CAN bus (changeable: "
+                    "loss, error_rate)");
+  }
+
+  caf::expected<std::string> get_param(const std::string& key) const override {
+    if (key == "backend")
+      return std::string{"emu"};
+    if (key == "loss")
+      return format_double(loss_.load());
+    if (key == "error_rate")
+      return format_double(error_rate_.load());
+    if (key == "tx_lost")
+      return std::to_string(tx_lost_.load());
+    if (key == "tx_overruns")
+      return std::to_string(station_.overruns());
+    if (key == "tx_errors")
+      return std::to_string(tx_errors_.load());
+    if (key == "arbitration_lost")
+      return std::to_string(arbitration_lost_.load());
+    return can_driver::get_param(key);
+  }
+
+private:
+  struct tx_frame {
+    /// Arbitration key on the bus (can::arbitration_key).
+    uint32_t key = 0;
+    /// Order in our own queue: the priority (0..7).
+    uint8_t order = 0;
+    uint64_t seq = 0;
+    int64_t enqueued_at = 0;
+    uint32_t bits = 0;
+    size_t wire_size = 0;
+    canfd_frame frame;
+  };
+
+  /// std::*_heap comparator of the transmit queue: most urgent priority
+  /// first, FIFO within a priority, so a control frame overtakes bulk
+  /// frames queued before it. Receivers reassemble per lane (priority and
+  /// broadcast, can::lane_of), so that costs no packet. (A controller whose
+  /// mailboxes arbitrate by full identifier also lets unicasts overtake a
+  /// broadcast of the same priority: another lane, also harmless.)
+  static bool later(const tx_frame& x, const tx_frame& y) {
+    return x.order != y.order ? x.order > y.order : x.seq > y.seq;
+  }
+
+
+  bus_layout& bus() const {
+    return *static_cast<bus_layout*>(station_.state());
+  }
+
+  // -- medium_client: joining ----------------------------------------------------
+
+  /// Checks the bus's bit rate and claims the node id.
+  caf::expected<uint64_t> admit(void* state,
+                                const std::vector<uint64_t>& live) override {
+    auto& b = *static_cast<bus_layout*>(state);
+    auto& dir = cfg_.interface;
+    if (live.empty()) {
+      // First station: it sets the bit rate; state of earlier users goes.
+      b.bitrate.store(cfg_.bitrate);
+      b.busy_until.store(0);
+      for (auto& slot : b.slots) {
+        slot.pending.store(0);
+        slot.ready_at.store(0);
+        slot.heartbeat.store(0);
+      }
+    } else if (b.bitrate.load() != cfg_.bitrate) {
+      return fail(ec::device_unavailable,
+                  "bus '" + dir + "' runs at "
+                    + std::to_string(b.bitrate.load())
+                    + " bit/s (nodes " + join_numbers(live)
+                    + "), this device is configured for "
+                    + std::to_string(cfg_.bitrate) + " bit/s");
+    }
+    if (std::find(live.begin(), live.end(), cfg_.node) != live.end())
+      return fail(ec::already_exists, taken(cfg_.node));
+    auto& me = b.slots[cfg_.node];
+    me.pending.store(0);
+    me.ready_at.store(0);
+    me.heartbeat.store(now_ns());
+    return uint64_t{cfg_.node};
+  }
+
+  std::string taken(uint64_t node) const override {
+    return "node " + std::to_string(node) + " is already on bus '"
+           + cfg_.interface + "'";
+  }
+
+  // -- arbitration and transmission ------------------------------------------------
+
+  /// Makes `f` this station's published frame and shows a sign of life.
+  /// Called with mtx_ held.
+  void publish(const tx_frame& f) {
+    auto& me = bus().slots[cfg_.node];
+    auto word = uint64_t{1} << 32 | f.key;
+    me.heartbeat.store(now_ns());
+    if (published_ != word || published_ready_ != f.enqueued_at) {
+      me.ready_at.store(f.enqueued_at);
+      me.pending.store(word);
+      published_ = word;
+      published_ready_ = f.enqueued_at;
+    }
+  }
+
+  void unpublish() {
+    bus().slots[cfg_.node].pending.store(0);
+    published_ = 0;
+  }
+
+  /// The arbitration `mine` takes part in (emu_medium::arbitrate), with the
+  /// bus idle since `busy` (<= now). Published frames of stations without a
+  /// heartbeat for stale_ns (dead or stopped processes) do not count.
+  emu_medium::arbitration arbitrate(const tx_frame& mine, int64_t busy,
+                                    int64_t now) const {
+    emu_medium::contender rivals[bus_slots];
+    size_t count = 0;
+    for (size_t n = 1; n < bus_slots - 1; ++n) {
+      if (n == cfg_.node)
+        continue;
+      auto& slot = bus().slots[n];
+      auto word = slot.pending.load();
+      if (word == 0)
+        continue;
+      auto ready = slot.ready_at.load();
+      if (now - slot.heartbeat.load() > stale_ns)
+        continue;
+      rivals[count++] = {static_cast<uint32_t>(word), ready};
+    }
+    return emu_medium::arbitrate({mine.key, mine.enqueued_at}, rivals, count,
+                                 busy);
+  }
+
+  // Arbitration, one frame at a time:
+  //  1. The lowest queued frame is published in our slot with its ready
+  //     time (send() does that before it returns).
+  //  2. While the bus is busy, sleep until it is idle.
+  //  3. Decide the arbitration (emu_medium::arbitrate): the frames ready
+  //     when the bus first was idle with something to send compete; the
+  //     lowest key wins. A loser naps briefly and goes to 2 (the winner
+  //     will have taken the bus).
+  //  4. The winner's transmission starts at that arbitration point, or at
+  //     now - max_credit_ns if the thread woke later than that: frames
+  //     queued back to back leave no gaps despite wake-up latency, and a
+  //     stalled process cannot release an unbounded burst.
+  //  5. Take the bus with compare_exchange(busy_until: idle -> start +
+  //     frame time). Only one station succeeds per idle period, and busy
+  //     periods never overlap, so the bus never carries more than its bit
+  //     rate. A station that lost the exchange goes to 2.
+  //  6. Send the frame to every other station, to be delivered when the
+  //     transmission ends.
+  void transmit_loop() {
+    ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0); // precise wake-ups
+    std::vector<uint8_t> buf(wire::header_size + CANFD_MTU);
+    auto& busy_until = bus().busy_until;
+    std::unique_lock<std::mutex> lk{mtx_};
+    for (;;) {
+      tx_idle_ = true;
+      tx_cv_.wait(lk, [this] { return stopping_ || !queue_.empty(); });
+      tx_idle_ = false;
+      if (stopping_)
+        break;
+      auto& head = queue_.front();
+      publish(head);
+      auto now = now_ns();
+      auto busy = busy_until.load();
+      if (busy > now) {
+        tx_cv_.wait_until(lk, to_time_point(
+                                std::min(busy, now + heartbeat_period_ns)));
+        continue;
+      }
+      auto arb = arbitrate(head, busy, now);
+      if (!arb.wins) {
+        ++arbitration_lost_;
+        tx_cv_.wait_until(lk, to_time_point(now + backoff_ns));
+        continue;
+      }
+      auto start = std::max(arb.point, now - emu_medium::max_credit_ns);
+      bool destroyed = dice_.chance(error_rate_.load());
+      auto bits = head.bits + (destroyed ? error_frame_bits : 0);
+      auto end = start + bits_time_ns(bits, cfg_.bitrate);
+      if (!busy_until.compare_exchange_strong(busy, end))
+        continue; // somebody else took the bus first
+      tx_frame f = head;
+      if (!destroyed) {
+        std::pop_heap(queue_.begin(), queue_.end(), later);
+        queue_.pop_back();
+        if (queue_.empty())
+          unpublish();
+        else
+          publish(queue_.front());
+      }
+      lk.unlock();
+      if (destroyed)
+        ++tx_errors_;
+      else
+        ++tx_frames_;
+      if (!station_.failed() && !fan_out(f, end, destroyed, buf)) {
+        lk.lock();
+        break;
+      }
+      lk.lock();
+    }
+    unpublish();
+  }
+
+  /// Sends one frame (or, when `destroyed`, an error frame) to the stations
+  /// on the bus. False after a fatal error.
+  bool fan_out(const tx_frame& f, int64_t end, bool destroyed,
+               std::vector<uint8_t>& buf) {
+    wire::header hdr;
+    hdr.flags = destroyed ? wire::flag_error : 0;
+    hdr.deliver_at_ns = end;
+    wire::encode(hdr, buf.data());
+    std::memcpy(buf.data() + wire::header_size, &f.frame, f.wire_size);
+    auto size = wire::header_size + f.wire_size;
+    auto loss = loss_.load();
+    return station_.for_each_peer([&](uint64_t peer) {
+      // Every station hears an error frame, the sender included; a data
+      // frame goes to every other station (as with CAN_RAW_RECV_OWN_MSGS
+      // off). Loss drops a frame for one receiver (not what CAN does, but
+      // what the upper layers must survive).
+      if ((peer == cfg_.node && !destroyed)
+          || (!destroyed && dice_.chance(loss))) {
+        if (peer != cfg_.node)
+          ++tx_lost_;
+        return send_result::ok;
+      }
+      return station_.send_to(peer, buf.data(), size);
+    });
+  }
+
+  // -- medium_client: receive thread ---------------------------------------------
+
+  bool accept(const uint8_t* data, size_t size, int64_t now,
+              int64_t& deliver_at) override {
+    wire::header hdr;
+    auto st = wire::check(data, size, now, hdr);
+    if (st != wire::status::ok) {
+      malformed(*handler_, 0,
+                std::string{"emulated bus: "} + wire::to_string(st) + " ("
+                  + std::to_string(size) + "-byte datagram)");
+      return false;
+    }
+    deliver_at = hdr.deliver_at_ns;
+    return true;
+  }
+
+  void deliver(const uint8_t* data, size_t size) override {
+    auto hdr = wire::decode(data);
+    if ((hdr.flags & wire::flag_error) != 0) {
+      // The frame was destroyed on the bus: what arrives is the error.
+      canfd_frame err{};
+      err.can_id = CAN_ERR_FLAG | CAN_ERR_PROT;
+      err.len = CAN_ERR_DLC;
+      error_frame(*handler_, err);
+      return;
+    }
+    canfd_frame frame;
+    auto nbytes = size - wire::header_size; // CAN_MTU or CANFD_MTU (checked)
+    std::memset(&frame, 0, sizeof(frame));
+    std::memcpy(&frame, data + wire::header_size, nbytes);
+    dispatch(*handler_, frame, nbytes);
+  }
+
+  void fail(caf::error err) override {
+    handler_->on_failure(std::move(err));
+  }
+
+  using can_driver::fail;
+
+  // -- state ---------------------------------------------------------------------
+
+  emu_medium::station station_;
+
+  std::atomic<double> loss_;
+  std::atomic<double> error_rate_;
+
+  // Lifecycle.
+  std::mutex life_mtx_;
+  bool stopped_ = false;
+  std::shared_ptr<frame_handler> handler_;
+  std::thread tx_thread_;
+  std::thread rx_thread_;
+
+  // Transmit queue (a heap, see `later`) and our slot, guarded by mtx_.
+  std::mutex mtx_;
+  std::condition_variable tx_cv_;
+  std::vector<tx_frame> queue_;
+  uint64_t next_seq_ = 0;
+  uint64_t published_ = 0;
+  int64_t published_ready_ = 0;
+  bool stopping_ = false;
+  bool tx_idle_ = false;
+
+  // Transmit thread only.
+  emu_medium::dice dice_;
+
+  // Counters (get_param).
+  std::atomic<uint64_t> tx_lost_{0};
+  std::atomic<uint64_t> tx_errors_{0};
+  std::atomic<uint64_t> arbitration_lost_{0};
+};
+
+} // namespace
+
+caf::expected<link_driver_ptr> open_emulated_bus(can_config cfg) {
+  auto driver = std::make_shared<emu_can_driver>(std::move(cfg));
+  if (auto err = driver->open())
+    return err;
+  if (auto err = driver->start_transmitter())
+    return err;
+  return link_driver_ptr{std::move(driver)};
+}
+
+} // namespace herm::can

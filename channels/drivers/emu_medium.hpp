@@ -1,0 +1,474 @@
+#pragma once
+
+// The emulated medium: what the link kind "emu" (channels/drivers/emu.cpp)
+// and the can kind's emulated bus (channels/drivers/can_emu.cpp) share.
+//
+// A medium is a directory (channels/drivers/medium_dir.hpp): every station
+// binds an AF_UNIX datagram socket <dir>/<N>.sock (N in 1..254), and a
+// shared, mmapped state file in the directory (its layout belongs to the
+// kind of medium) holds what all stations must agree on, in CLOCK_MONOTONIC
+// ns (system-wide, so every process agrees). Joining serialises on
+// flock(state file).
+//
+// Two layers:
+//  * pure parts (dice, copies/fate_of_copy, reserve, arbitrate, hold_queue):
+//    no clock, no I/O; time and random draws go in as arguments, so they are
+//    tested table-driven (tests/channels/emu_medium_test.cpp);
+//  * `station`: one station's I/O on the medium (directory, state file,
+//    station claim, sockets, fan-out to peers, the receive loop with its
+//    hold queue, liveness of its files). What differs between kinds of
+//    medium (state file layout, who may join, datagram codec, delivery) is
+//    asked of a `medium_client` the driver implements.
+//
+// Threads are the drivers' own: a station is used by one transmit thread
+// (send_to, for_each_peer, report_tx_failure) and one receive thread
+// (receive_loop); request_stop, failed and counters may be called from any
+// thread; open and leave by the driver's life cycle only, with no transmit
+// or receive thread running in it (leave: see its comment).
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <mutex>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <caf/expected.hpp>
+
+#include <sys/types.h>
+#include <sys/un.h>
+
+#include "channels/drivers/emu_wire.hpp"
+#include "channels/drivers/posix.hpp"
+#include "channels/error.hpp"
+
+namespace herm::emu_medium {
+
+// -- limits -------------------------------------------------------------------
+
+/// Station numbers on every emulated medium (the file names N.sock).
+constexpr uint64_t min_station = 1;
+constexpr uint64_t max_station = 254;
+
+/// How often the receive loop checks that its files still exist.
+constexpr int64_t liveness_period_ns = 100'000'000;
+/// Peers are rescanned at least this often (and whenever a station joins
+/// or leaves through a driver: the state file's generation counter).
+constexpr int64_t rescan_period_ns = 100'000'000;
+/// Grace period a transmitter gives a receiver whose socket queue is full
+/// before the frame counts as an overrun (SO_SNDTIMEO).
+constexpr int64_t overrun_wait_ns = 25'000'000;
+/// Bound of the back-to-back credit (see reserve, emu::transmission_start).
+constexpr int64_t max_credit_ns = 50'000'000;
+/// Datagrams a receiver holds for later delivery; above this, the earliest
+/// is handed up early rather than dropped.
+constexpr size_t max_held_frames = 4096;
+/// Datagrams read per wake-up before due frames are delivered again.
+constexpr int max_reads_per_wakeup = 64;
+
+// -- pure parts: impairments ---------------------------------------------------
+
+/// The medium's random decisions from one seeded generator. The sequence of
+/// draws is part of what a seed reproduces, so each function states what it
+/// draws. Not thread-safe: one owner (a transmit thread).
+class dice {
+public:
+  explicit dice(uint64_t seed) : rng_(seed) {
+  }
+
+  /// True with probability `p` (in [0, 1]). Draws one number only when
+  /// p > 0: a medium without an impairment leaves later draws unchanged.
+  bool chance(double p) {
+    return p > 0 && std::uniform_real_distribution<double>{0.0, 1.0}(rng_) < p;
+  }
+
+  /// Uniform in [0, max]; draws only when max > 0 (else 0).
+  int64_t up_to(int64_t max) {
+    return max > 0 ? std::uniform_int_distribution<int64_t>{0, max}(rng_) : 0;
+  }
+
+  /// Uniform bit index in [0, bits); one draw. bits > 0.
+  size_t bit_of(size_t bits) {
+    return std::uniform_int_distribution<size_t>{0, bits - 1}(rng_);
+  }
+
+private:
+  std::mt19937_64 rng_;
+};
+
+/// What a medium does to each frame for each receiver. Probabilities in
+/// [0, 1], times in ns (>= 0).
+struct impairments {
+  double loss = 0;
+  double duplicate = 0;
+  double corrupt = 0;
+  int64_t latency_ns = 0;
+  int64_t jitter_ns = 0;
+};
+
+/// How many copies of a frame reach one receiver: 0 (lost with probability
+/// loss), else 2 with probability duplicate, else 1. Draws: loss, then (when
+/// not lost) duplicate, each only when its probability is > 0.
+int copies(dice& d, const impairments& imp);
+
+/// One copy of a frame as it reaches its receiver.
+struct copy_fate {
+  /// end of transmission + latency + a jitter in [0, jitter_ns].
+  int64_t deliver_at_ns = 0;
+  /// The payload bit the medium flipped (byte bit / 8, mask 1 << bit % 8),
+  /// or -1.
+  int64_t flipped_bit = -1;
+};
+
+/// The fate of one copy of a `payload`-byte frame whose transmission ends
+/// at `end_ns`. Draws: jitter (if > 0), then, for a non-empty payload,
+/// corrupt (if > 0) and, when it hits, the bit.
+copy_fate fate_of_copy(dice& d, const impairments& imp, int64_t end_ns,
+                       size_t payload);
+
+// -- pure parts: medium access -------------------------------------------------
+
+/// Reserves `frame_ns` of medium time on a shared "busy until" word (ns) for
+/// a frame handed to the driver at `enqueued_at`: the transmission starts at
+/// emu::transmission_start(busy, enqueued_at, now(), max_credit_ns).
+/// Returns its end. Lock-free; reservations never overlap, as each starts
+/// at or after the busy time it replaces. `now` is called once per attempt.
+template <class Clock>
+int64_t reserve(std::atomic<int64_t>& busy_until, int64_t enqueued_at,
+                int64_t frame_ns, Clock&& now) {
+  auto busy = busy_until.load();
+  int64_t end = 0;
+  do {
+    end = emu::transmission_start(busy, enqueued_at, now(), max_credit_ns)
+          + frame_ns;
+  } while (!busy_until.compare_exchange_weak(busy, end));
+  return end;
+}
+
+/// A frame waiting for a contended bus: its arbitration key (lower wins)
+/// and when it was ready (ns).
+struct contender {
+  uint32_t key = 0;
+  int64_t ready_at = 0;
+};
+
+struct arbitration {
+  /// `mine` may take the bus.
+  bool wins = false;
+  /// When the arbitration happened: max(busy, earliest ready time).
+  int64_t point = 0;
+};
+
+/// Decides the arbitration `mine` takes part in on a bus idle since `busy`:
+/// it happens at the first moment the bus was idle and some frame was
+/// ready; every frame ready by then competes and the lowest key wins (ties
+/// go to `mine`: keys on a bus are unique). `mine` loses when it was not
+/// ready yet at that point. O(rivals).
+arbitration arbitrate(contender mine, const contender* rivals, size_t count,
+                      int64_t busy);
+
+// -- pure parts: the hold queue ------------------------------------------------
+
+/// Received datagrams held until their delivery time, earliest first, in
+/// arrival order among equal times. Capacity is the caller's to enforce
+/// (full(): deliver the earliest early). Receive thread only.
+/// Memory: the datagrams held plus at most `spare_buffers` recycled ones.
+class hold_queue {
+public:
+  static constexpr size_t spare_buffers = 64;
+
+  explicit hold_queue(size_t capacity) : capacity_(capacity) {
+  }
+
+  bool empty() const {
+    return heap_.empty();
+  }
+
+  size_t size() const {
+    return heap_.size();
+  }
+
+  bool full() const {
+    return heap_.size() >= capacity_;
+  }
+
+  /// Earliest delivery time (ns). Precondition: !empty().
+  int64_t next_due() const {
+    return heap_.front().deliver_at;
+  }
+
+  /// Whether the earliest datagram is due at `now`.
+  bool due(int64_t now) const {
+    return !heap_.empty() && heap_.front().deliver_at <= now;
+  }
+
+  /// Copies `size` bytes of `data`. Precondition: !full(). O(log n).
+  void push(int64_t deliver_at, const uint8_t* data, size_t size);
+
+  /// Removes the earliest datagram and returns its bytes; hand them back
+  /// with recycle() when done. Precondition: !empty(). O(log n).
+  std::vector<uint8_t> pop();
+
+  /// Keeps `buf` for a later push (up to spare_buffers).
+  void recycle(std::vector<uint8_t> buf);
+
+private:
+  struct held {
+    int64_t deliver_at = 0;
+    uint64_t seq = 0;
+    std::vector<uint8_t> bytes;
+  };
+
+  /// std::*_heap order for a min-heap by (deliver_at, seq).
+  static bool later(const held& x, const held& y) {
+    return x.deliver_at != y.deliver_at ? x.deliver_at > y.deliver_at
+                                        : x.seq > y.seq;
+  }
+
+  size_t capacity_;
+  uint64_t next_seq_ = 0;
+  std::vector<held> heap_;
+  std::vector<std::vector<uint8_t>> spare_;
+};
+
+// -- one station on a medium ---------------------------------------------------
+
+/// The words naming a kind of medium in errors (users and tests read them).
+struct medium_texts {
+  /// "medium": "medium directory 'D'", "medium path", "medium file 'F'".
+  const char* noun;
+  /// "an emu medium file": "'F' is not an emu medium file".
+  const char* file_kind;
+  /// "emulated link socket": "cannot poll emulated link socket P".
+  const char* socket_noun;
+  /// "emulated link": "cannot send on emulated link D".
+  const char* link_noun;
+  /// "emulated link file": "emulated link file P removed".
+  const char* file_noun;
+  /// Appended to "<file_noun> P" when the file is gone / replaced.
+  const char* removed;
+  const char* replaced;
+};
+
+/// A kind of medium: its state file and the knobs of its sockets.
+struct medium_spec {
+  /// Name of the state file in the directory.
+  const char* state_file;
+  /// Size of the state file in bytes. Its first 8 bytes are a uint32 magic
+  /// and a uint32 version (0 and 0: a new file, written on first open).
+  size_t state_size;
+  uint32_t magic;
+  uint32_t version;
+  /// Offset of the std::atomic<uint32_t> that counts joins and leaves.
+  size_t generation_offset;
+  /// Whether the station is among its own peers (for_each_peer).
+  bool self_is_peer;
+  /// SO_RCVBUF of the receive socket, SO_SNDBUF of the transmit socket;
+  /// 0: the system's default. Best effort (capped by net.core.*mem_max).
+  int rcvbuf;
+  int sndbuf;
+  /// Name of the receive thread (pthread_setname_np), or nullptr.
+  const char* rx_thread_name;
+  medium_texts texts;
+};
+
+/// What a driver decides for its kind of medium. Each call names its thread.
+class medium_client {
+public:
+  virtual ~medium_client();
+
+  /// open(), under the state file's lock: `live` are the stations on the
+  /// medium now (ascending). Checks that this station fits the medium
+  /// (resetting the shared state when `live` is empty) and returns its
+  /// number in [min_station, max_station], or the error to show.
+  virtual caf::expected<uint64_t> admit(void* state,
+                                        const std::vector<uint64_t>& live)
+    = 0;
+
+  /// open(): "station N is already taken on medium 'D'" for a live station.
+  virtual std::string taken(uint64_t station) const = 0;
+
+  /// Receive thread: checks a datagram of `size` bytes (the real size; the
+  /// buffer holds min(size, its capacity)). True with `deliver_at` (ns) set,
+  /// or false after the client reported it as malformed.
+  virtual bool accept(const uint8_t* data, size_t size, int64_t now,
+                      int64_t& deliver_at)
+    = 0;
+
+  /// Receive thread: a datagram accepted earlier is due.
+  virtual void deliver(const uint8_t* data, size_t size) = 0;
+
+  /// Receive thread: a fatal error; the loop ends right after. Never
+  /// called after request_stop.
+  virtual void fail(caf::error err) = 0;
+};
+
+class station {
+public:
+  enum class send_result {
+    ok,   ///< sent, or lost at the receiver (overrun) or not for us
+    gone, ///< nobody there (any more)
+    fatal ///< reported through report_tx_failure
+  };
+
+  /// `dir` without trailing '/', short enough for <dir>/254.sock in a
+  /// sockaddr_un; `prefix` starts every error text ("device 'X': ").
+  /// `client` must outlive the station.
+  station(std::string dir, std::string prefix, const medium_spec& spec,
+          medium_client& client);
+
+  /// Unmaps the state file. No thread may use the station any more.
+  ~station();
+
+  station(const station&) = delete;
+  station& operator=(const station&) = delete;
+
+  /// Joins the medium: the directory (created when `create`), the state
+  /// file (created, sized, checked), the station (client.admit, stale
+  /// socket files of dead processes removed) and its sockets. Errors:
+  /// ec::device_unavailable (or what admit returns, or ec::already_exists
+  /// when the socket is taken), with the paths in the text.
+  caf::error open(bool create);
+
+  /// The mapped state file (spec.state_size bytes); null before open().
+  void* state() const {
+    return state_;
+  }
+
+  uint64_t number() const {
+    return number_;
+  }
+
+  const std::string& dir() const {
+    return dir_;
+  }
+
+  caf::error fail(ec code, const std::string& what) const;
+
+  // -- transmit thread ----------------------------------------------------------
+
+  /// Sends one datagram to station `dst` (1..254). A receiver that overran
+  /// once gets no grace period until it takes a datagram again, so a stuck
+  /// station cannot stall the medium. Never blocks beyond overrun_wait_ns.
+  send_result send_to(uint64_t dst, const uint8_t* data, size_t size);
+
+  /// Calls `f(peer)` (returning send_result) for every station on the
+  /// medium (rescanned when one joined or left, or every
+  /// rescan_period_ns); peers that are gone are dropped until the next
+  /// rescan. False as soon as `f` returns fatal.
+  template <class F>
+  bool for_each_peer(F&& f) {
+    refresh_peers();
+    for (size_t i = 0; i < peers_.size();) {
+      auto result = f(peers_[i]);
+      if (result == send_result::fatal)
+        return false;
+      if (result == send_result::gone)
+        peers_.erase(peers_.begin() + static_cast<ptrdiff_t>(i));
+      else
+        ++i;
+    }
+    return true;
+  }
+
+  /// Hands a fatal transmit error to the receive loop (the first one wins)
+  /// and marks the station failed.
+  void report_tx_failure(caf::error err);
+
+  // -- receive thread -----------------------------------------------------------
+
+  /// Receives until request_stop or a fatal error (reported once through
+  /// client.fail): reads datagrams of up to `max_datagram` bytes, has the
+  /// client accept them, holds them until they are due (max_held_frames),
+  /// delivers them through the client, checks every liveness_period_ns that
+  /// the socket and state files are still ours.
+  void receive_loop(size_t max_datagram);
+
+  // -- any thread ---------------------------------------------------------------
+
+  /// The receive loop calls the client no more and ends soon.
+  void request_stop();
+
+  bool stopping() const {
+    return stopping_.load();
+  }
+
+  /// After a fatal error (transmit or receive side).
+  bool failed() const {
+    return failed_.load();
+  }
+
+  /// Datagrams lost because a receiver's queue was full.
+  uint64_t overruns() const {
+    return overruns_.load();
+  }
+
+  // -- life cycle ---------------------------------------------------------------
+
+  /// Waits for the thread `rx` running receive_loop to end, after
+  /// request_stop. Called on `rx` itself (stop from a handler callback,
+  /// which would join the thread with itself) it detaches `rx` instead and
+  /// returns true: the loop ends when the callback returns, touching neither
+  /// the client nor the receive socket again.
+  static bool join_receiver(std::thread& rx);
+
+  /// Leaves the medium once the transmit thread has ended and the receive
+  /// thread has ended or, when `rx_running` (stop from a handler), will end
+  /// without touching the receive socket again: removes our socket file
+  /// (unless somebody else's replaced it), tells transmitters, closes the
+  /// transmit socket (and the receive socket unless `rx_running`).
+  void leave(bool rx_running);
+
+private:
+  caf::error open_directory(bool create);
+  caf::error open_state(posix::unique_fd& lock_fd);
+  caf::error claim();
+  void refresh_peers();
+  std::atomic<uint32_t>& generation() const;
+  caf::error check_files() const;
+  caf::error take_tx_failure();
+  bool read_datagrams(std::vector<uint8_t>& buf);
+  void deliver_front();
+  void report_failure(caf::error err);
+  void wake_receiver();
+
+  const std::string dir_;
+  const std::string prefix_; // "device 'NAME': "
+  const medium_spec spec_;
+  const std::string state_path_;
+  medium_client& client_;
+
+  void* state_ = nullptr;
+  uint64_t number_ = 0;
+  std::string sock_path_;
+  dev_t state_dev_ = 0;
+  ino_t state_ino_ = 0;
+  dev_t sock_dev_ = 0;
+  ino_t sock_ino_ = 0;
+  posix::unique_fd rx_fd_;
+  posix::unique_fd tx_fd_;
+  posix::unique_fd wake_fd_;
+
+  std::atomic<bool> stopping_{false};
+  std::atomic<bool> failed_{false};
+  std::atomic<uint64_t> overruns_{0};
+
+  // Transmit thread only.
+  sockaddr_un peer_addrs_[max_station + 1] = {};
+  bool congested_[max_station + 1] = {};
+  std::vector<uint64_t> peers_;
+  bool peers_valid_ = false;
+  uint32_t peers_generation_ = 0;
+  int64_t peers_scanned_at_ = 0;
+
+  // Failure handed from the transmit thread to the receive thread.
+  std::mutex failure_mtx_;
+  caf::error tx_failure_;
+
+  // Receive thread only.
+  hold_queue held_{max_held_frames};
+};
+
+} // namespace herm::emu_medium
