@@ -1,0 +1,64 @@
+#include "actors/outgoing_requests.hpp"
+
+namespace herm {
+
+outgoing_requests::outgoing_requests(uint64_t key, size_t max_pending)
+  : ids_(key), max_(max_pending) {
+  // nop
+}
+
+std::pair<uint64_t, outgoing&> outgoing_requests::add(outgoing out) {
+  auto rid = ids_.next();
+  return {rid, requests_.emplace(rid, std::move(out)).first->second};
+}
+
+outgoing* outgoing_requests::expecting(uint64_t rid, module_id src, bool ack) {
+  auto i = requests_.find(rid);
+  if (i == requests_.end())
+    return nullptr;
+  auto& out = i->second;
+  if (out.tx.dst != src || (out.reliable && out.tx.sends == 0)
+      || (ack && !out.reliable))
+    return nullptr;
+  return &out;
+}
+
+outgoing outgoing_requests::take(uint64_t rid) {
+  auto i = requests_.find(rid);
+  auto result = std::move(i->second);
+  requests_.erase(i);
+  return result;
+}
+
+template <class Pred>
+std::vector<outgoing> outgoing_requests::take_if(Pred pred) {
+  std::vector<outgoing> result;
+  for (auto i = requests_.begin(); i != requests_.end();) {
+    if (pred(i->second)) {
+      result.push_back(std::move(i->second));
+      i = requests_.erase(i);
+    } else {
+      ++i;
+    }
+  }
+  return result;
+}
+
+std::vector<outgoing> outgoing_requests::take_waiting_on(uint32_t binding,
+                                                         module_id dst,
+                                                         bool keep_reliable) {
+  return take_if([&](const outgoing& out) {
+    return (binding != 0 ? out.binding == binding : out.tx.dst == dst)
+           && !(keep_reliable && out.reliable);
+  });
+}
+
+std::vector<outgoing> outgoing_requests::take_expired(time_point now) {
+  return take_if([&](const outgoing& out) { return out.deadline <= now; });
+}
+
+std::vector<outgoing> outgoing_requests::take_all() {
+  return take_if([](const outgoing&) { return true; });
+}
+
+} // namespace herm

@@ -1,0 +1,106 @@
+#pragma once
+
+// The requests one application support actor sent to remote APOs and waits
+// to hear about (pure core): who asked, through which binding, by when, and
+// in reliable mode the message to send again with its copy schedule
+// (reliable_requests decides that schedule).
+//
+// No clock and no I/O: time comes in as arguments, and the caller answers
+// the requesters with what it takes out. Requesters' handles and messages
+// are held as plain values, never used. Not thread-safe (one actor owns
+// it). At most `max_pending` requests (add refuses more); lookups O(log n),
+// the take_* scans O(n).
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <utility>
+#include <vector>
+
+#include "caf/actor_control_block.hpp"
+#include "caf/message.hpp"
+#include "caf/message_id.hpp"
+
+#include "actors/app_table.hpp"
+#include "actors/reliable_requests.hpp"
+
+namespace herm {
+
+/// A request sent to a remote APO, waiting for its response.
+struct outgoing {
+  caf::strong_actor_ptr sender;
+  caf::message_id mid;
+  uint32_t binding = 0;
+  std::chrono::steady_clock::time_point deadline;
+  // -- reliable mode: what to send again, and when --
+  bool reliable = false;
+  bool oneway = false;
+  /// The message (handed over unchanged if a rebinding proxy's new target
+  /// is local) and its marshalled form.
+  caf::message msg;
+  byte_buffer payload;
+  /// The module it went to (tx.dst; plain requests too) and, in reliable
+  /// mode, the schedule of its copies.
+  reliable_requests::transmission tx;
+};
+
+class outgoing_requests {
+public:
+  using time_point = std::chrono::steady_clock::time_point;
+
+  /// Request ids come from a scrambled_sequence keyed with `key`: they go
+  /// on the wire, and a forged response should need more than one packet
+  /// sniffed.
+  outgoing_requests(uint64_t key, size_t max_pending);
+
+  bool full() const {
+    return requests_.size() >= max_;
+  }
+
+  size_t size() const {
+    return requests_.size();
+  }
+
+  /// Adds `out` (room permitting: see full) under a fresh request id.
+  std::pair<uint64_t, outgoing&> add(outgoing out);
+
+  /// The request a response (or, with `ack`, an ack) from module `src`
+  /// answers: nullptr if `rid` does not wait for one from there (unknown,
+  /// another module's, a reliable one with no copy out yet; for an ack,
+  /// a plain one).
+  outgoing* expecting(uint64_t rid, module_id src, bool ack);
+
+  void erase(uint64_t rid) {
+    requests_.erase(rid);
+  }
+
+  /// Removes `rid` and returns it (it must be there).
+  outgoing take(uint64_t rid);
+
+  /// Removes and returns, in id order, the requests on binding `binding`
+  /// (or, when it is 0, those sent to module `dst`); reliable ones stay
+  /// when `keep_reliable`.
+  std::vector<outgoing> take_waiting_on(uint32_t binding, module_id dst,
+                                        bool keep_reliable);
+
+  /// Removes and returns, in id order, the requests whose deadline is not
+  /// after `now`.
+  std::vector<outgoing> take_expired(time_point now);
+
+  /// Removes and returns all.
+  std::vector<outgoing> take_all();
+
+  std::map<uint64_t, outgoing>& all() {
+    return requests_;
+  }
+
+private:
+  template <class Pred>
+  std::vector<outgoing> take_if(Pred pred);
+
+  scrambled_sequence<uint64_t> ids_;
+  size_t max_;
+  std::map<uint64_t, outgoing> requests_;
+};
+
+} // namespace herm
