@@ -5,6 +5,7 @@
 // docs/protocol.md ("Control requests").
 
 #include "actors/control.hpp"
+#include "actors/control_json.hpp"
 
 #include <algorithm>
 #include <exception>
@@ -12,8 +13,6 @@
 #include <map>
 #include <memory>
 #include <optional>
-
-#include <nlohmann/json.hpp>
 
 #include "caf/actor_cast.hpp"
 #include "caf/actor_system.hpp"
@@ -24,13 +23,12 @@
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/type_ids.hpp"
 #include "actors/unexpected.hpp"
-#include "routing/metric.hpp"
 
 namespace herm {
 
 namespace {
 
-using json = nlohmann::json;
+using namespace control_json;
 using clock_type = std::chrono::steady_clock;
 using ms = std::chrono::milliseconds;
 
@@ -40,299 +38,6 @@ constexpr uint32_t discovery_ms = 500;
 /// Bounds on what a request may ask for.
 constexpr uint32_t max_ping_count = 1000;
 constexpr uint32_t max_timeout_ms = 600000;
-
-// -- replies -------------------------------------------------------------------------
-
-/// Never throws on odd bytes in names: invalid UTF-8 is replaced.
-std::string dump(const json& j) {
-  return j.dump(-1, ' ', false, json::error_handler_t::replace);
-}
-
-std::string ok_reply(json result) {
-  return dump(json{{"ok", true}, {"result", std::move(result)}});
-}
-
-std::string error_reply(const std::string& code, const std::string& message) {
-  return dump(json{{"ok", false},
-                   {"error", {{"code", code}, {"message", message}}}});
-}
-
-/// CAF's codes a user could meet, as HERM's own: an actor of this module
-/// that stopped is app_ec::unavailable, a request that timed out ec::timeout.
-caf::error herm_error(const caf::error& err) {
-  if (err == caf::sec::request_receiver_down)
-    return make_error(app_ec::unavailable,
-                      "a core actor of this module (IO manager, routing agent "
-                      "or application support) has stopped");
-  if (err == caf::sec::request_timeout)
-    return make_error(ec::timeout, "no answer in time");
-  return err;
-}
-
-/// "no_route" for herm's errors, "timeout" for CAF's request timeout,
-/// "system.NAME" for CAF's other errors.
-std::string error_code(const caf::error& raw) {
-  auto err = herm_error(raw);
-  if (!err)
-    return "none";
-  if (err.category() == caf::atom("herm"))
-    return error_name(err.code());
-  if (err.category() == caf::atom("system")
-      && static_cast<caf::sec>(err.code()) == caf::sec::request_timeout)
-    return "timeout";
-  auto text = render(err);
-  return text.substr(0, text.find(':'));
-}
-
-/// The error's context when it is a sentence, else the whole rendering.
-std::string error_message(const caf::error& raw) {
-  auto err = herm_error(raw);
-  if (err && err.context().match_elements<std::string>())
-    return err.context().get_as<std::string>(0);
-  return render(err);
-}
-
-std::string error_reply(const caf::error& err) {
-  return error_reply(error_code(err), error_message(err));
-}
-
-// -- JSON of HERM's types ----------------------------------------------------------------
-
-json cost_json(uint64_t cost) {
-  return cost >= infinite_metric ? json(nullptr) : json(cost);
-}
-
-json to_json(const link_profile& p) {
-  return {{"name", p.name},
-          {"bandwidth_bps", p.bandwidth_bps},
-          {"mtu", p.mtu},
-          {"multi_access", p.multi_access},
-          {"delay_coef", p.delay_coef},
-          {"cost", p.bandwidth_bps > 0 ? cost_json(link_cost(p)) : json(nullptr)}};
-}
-
-json to_json(const channel_stats& s) {
-  return {{"tx_packets", s.tx_packets},
-          {"tx_bytes", s.tx_bytes},
-          {"tx_frames", s.tx_frames},
-          {"tx_dropped", s.tx_dropped},
-          {"rx_packets", s.rx_packets},
-          {"rx_bytes", s.rx_bytes},
-          {"rx_frames", s.rx_frames},
-          {"rx_malformed", s.rx_malformed},
-          {"rx_reassembly_dropped", s.rx_reassembly_dropped},
-          {"rx_duplicates", s.rx_duplicates},
-          {"rx_orphans", s.rx_orphans},
-          {"rx_kernel_dropped", s.rx_kernel_dropped},
-          {"rx_queue_dropped", s.rx_queue_dropped},
-          {"rx_peers_unrecorded", s.rx_peers_unrecorded},
-          {"tx_overload", {{"control", s.tx_overload_control},
-                           {"high", s.tx_overload_high},
-                           {"normal", s.tx_overload_normal},
-                           {"bulk", s.tx_overload_bulk}}},
-          {"backlog_bytes", s.backlog_bytes},
-          {"backlog_peak_bytes", s.backlog_peak_bytes},
-          {"backlog_limit_bytes", s.backlog_limit_bytes},
-          {"tx_bundles", s.tx_bundles},
-          {"rx_bundles", s.rx_bundles}};
-}
-
-json to_json(const channel_entry& e) {
-  return {{"id", e.id},
-          {"device", e.request.device},
-          {"address", e.request.address},
-          {"persistent", e.request.persistent},
-          {"routed", !e.request.local},
-          {"state", e.state},
-          {"last_error", e.last_error},
-          {"restarts", e.restarts},
-          {"kind", e.info.kind},
-          {"local", e.info.local},
-          {"profile", to_json(e.info.profile)},
-          {"max_packet", e.info.max_packet},
-          {"peers", e.info.peers},
-          {"stats", nullptr}};
-}
-
-json to_json(const routing_stats& s) {
-  return {{"self", to_hex(s.self)},
-          {"instance", s.instance},
-          {"assigned", s.assigned},
-          {"renumberings", s.renumberings},
-          {"reachable", s.reachable},
-          {"delivered", s.delivered},
-          {"forwarded", s.forwarded},
-          {"originated", s.originated},
-          {"dropped_no_route", s.dropped_no_route},
-          {"dropped_hop_limit", s.dropped_hop_limit},
-          {"dropped_no_receiver", s.dropped_no_receiver},
-          {"broadcasts_originated", s.broadcasts_originated},
-          {"broadcasts_relayed", s.broadcasts_relayed},
-          {"dropped_duplicate", s.dropped_duplicate},
-          {"rx_malformed", s.rx_malformed},
-          {"rx_unknown_neighbour", s.rx_unknown_neighbour},
-          {"rx_refused_routes", s.rx_refused_routes},
-          {"rx_goodbyes", s.rx_goodbyes},
-          {"tx_hellos", s.tx_hellos},
-          {"tx_updates", s.tx_updates},
-          {"tx_update_entries", s.tx_update_entries},
-          {"tx_claims", s.tx_claims},
-          {"tx_conflicts", s.tx_conflicts},
-          {"tx_seqno_requests", s.tx_seqno_requests},
-          {"rx_auth_failed", s.rx_auth_failed},
-          {"rx_replayed", s.rx_replayed},
-          {"rx_unsigned", s.rx_unsigned},
-          {"rx_auth_table_full", s.rx_auth_table_full},
-          {"tx_signed", s.tx_signed},
-          {"rx_auth_challenged", s.rx_auth_challenged},
-          {"rx_challenge_failed", s.rx_challenge_failed},
-          {"tx_challenges", s.tx_challenges},
-          {"tx_challenge_replies", s.tx_challenge_replies},
-          {"id_conflicts", s.id_conflicts},
-          {"id_conflict", s.id_conflict_instance == 0
-                            ? json(nullptr)
-                            : json{{"instance", s.id_conflict_instance},
-                                   {"heard", s.id_conflict_heard}}},
-          {"destinations", s.destinations},
-          {"routes", s.routes},
-          {"neighbours", s.neighbours},
-          {"rx_routes_over_limit", s.rx_routes_over_limit},
-          {"rx_routes_over_share", s.rx_routes_over_share},
-          {"rx_neighbours_over_limit", s.rx_neighbours_over_limit},
-          {"seqno_requests_over_limit", s.seqno_requests_over_limit},
-          {"floods_evicted", s.floods_evicted},
-          {"flood_ids_evicted", s.flood_ids_evicted},
-          {"sources_evicted", s.sources_evicted}};
-}
-
-json to_json(const app_support_stats& s) {
-  return {{"local_apos", s.local_apos},
-          {"known_remote_apos", s.known_remote_apos},
-          {"live_bindings", s.live_bindings},
-          {"pending_requests", s.pending_requests},
-          {"registered", s.registered},
-          {"withdrawn", s.withdrawn},
-          {"queries_sent", s.queries_sent},
-          {"queries_answered", s.queries_answered},
-          {"answers_received", s.answers_received},
-          {"requests_sent", s.requests_sent},
-          {"oneway_sent", s.oneway_sent},
-          {"requests_served", s.requests_served},
-          {"oneway_delivered", s.oneway_delivered},
-          {"responses_received", s.responses_received},
-          {"request_timeouts", s.request_timeouts},
-          {"proxies_ended", s.proxies_ended},
-          {"published", s.published},
-          {"publications_sent", s.publications_sent},
-          {"publications_received", s.publications_received},
-          {"publications_delivered", s.publications_delivered},
-          {"publications_lost", s.publications_lost},
-          {"rx_malformed", s.rx_malformed},
-          {"rx_unknown_apo", s.rx_unknown_apo},
-          {"rx_unknown_type", s.rx_unknown_type},
-          {"rx_unexpected_response", s.rx_unexpected_response},
-          {"tx_refused", s.tx_refused},
-          {"dropped_no_route", s.dropped_no_route},
-          {"rx_unauthorized", s.rx_unauthorized},
-          {"serving_refused", s.serving_refused},
-          {"remote_apos_refused", s.remote_apos_refused},
-          {"discovery_entries_refused", s.discovery_entries_refused},
-          {"watches", s.watches},
-          {"watches_refused", s.watches_refused},
-          {"subscribers_refused", s.subscribers_refused},
-          {"publishers_refused", s.publishers_refused},
-          {"unexpected_messages", s.unexpected_messages},
-          {"reliable", {{"sent", s.reliable_sent},
-                        {"retransmissions", s.retransmissions},
-                        {"duplicates_suppressed", s.duplicates_suppressed},
-                        {"acks_sent", s.acks_sent},
-                        {"acks_received", s.acks_received},
-                        {"late_duplicates", s.late_duplicates},
-                        {"waited_for_route", s.reliable_waited},
-                        {"cached_responses", s.cached_responses}}}};
-}
-
-json to_json(const neighbour_info& n) {
-  json cost = json::array();
-  for (auto c : n.cost)
-    cost.push_back(cost_json(c));
-  return {{"module", to_hex(n.id)},
-          {"channel", n.channel},
-          {"link_address", n.link_address},
-          {"instance", n.instance},
-          {"link_kind", n.link_kind},
-          {"cost", std::move(cost)},
-          {"last_heard_ms", n.last_heard_ms},
-          {"duplicate_id", n.duplicate_id}};
-}
-
-json to_json(const apo_info& a) {
-  return {{"module", to_hex(a.ref.module)},
-          {"apo", a.ref.apo},
-          {"name", a.ref.name},
-          {"type", a.ref.type},
-          {"local", a.local},
-          {"watchers", a.watchers},
-          {"age_ms", a.age_ms}};
-}
-
-/// A route row, completed with what the neighbour table says about its next
-/// hop (its module, link kind and direct cost in the row's class).
-json to_json(const route_info& r, const std::vector<neighbour_info>& ns) {
-  json j{{"destination", to_hex(r.destination)},
-         {"size_class", r.size_class},
-         {"size_class_bytes", r.size_class < size_classes
-                                ? json(size_class_bytes[r.size_class])
-                                : json(nullptr)},
-         {"channel", r.channel},
-         {"neighbour", r.neighbour},
-         {"neighbour_module", nullptr},
-         {"link_kind", nullptr},
-         {"link_cost", nullptr},
-         {"cost", cost_json(r.cost)},
-         {"hops", r.hops},
-         {"forwarding", r.forwarding},
-         {"selected", r.selected},
-         {"feasible", r.feasible}};
-  for (auto& n : ns)
-    if (n.channel == r.channel && n.link_address == r.neighbour) {
-      j["neighbour_module"] = to_hex(n.id);
-      j["link_kind"] = n.link_kind;
-      if (r.size_class < n.cost.size())
-        j["link_cost"] = cost_json(n.cost[r.size_class]);
-      break;
-    }
-  return j;
-}
-
-// -- request fields ------------------------------------------------------------------------
-
-/// A module id given as "0x4E", "78" or 78.
-std::optional<module_id> module_field(const json& v) {
-  if (v.is_string())
-    return parse_module_id(v.get<std::string>());
-  if (v.is_number_unsigned() && v.get<uint64_t>() <= 0xFFFF)
-    return static_cast<module_id>(v.get<uint64_t>());
-  return std::nullopt;
-}
-
-/// An unsigned field in [lo, hi], `fallback` when absent; nullopt when
-/// present but not such a number.
-std::optional<uint32_t> uint_field(const json& req, const char* key,
-                                   uint32_t fallback, uint32_t lo, uint32_t hi) {
-  auto i = req.find(key);
-  if (i == req.end())
-    return fallback;
-  if (!i->is_number_unsigned() || i->get<uint64_t>() < lo
-      || i->get<uint64_t>() > hi)
-    return std::nullopt;
-  return static_cast<uint32_t>(i->get<uint64_t>());
-}
-
-std::string string_field(const json& req, const char* key) {
-  auto i = req.find(key);
-  return i != req.end() && i->is_string() ? i->get<std::string>() : std::string{};
-}
 
 // -- the actor ------------------------------------------------------------------------------
 
@@ -572,26 +277,15 @@ void cmd_routes(control_impl self, const json& req, ms timeout,
       fail_with(rp));
 }
 
-void cmd_neighbors(control_impl self, ms timeout, reply_promise rp) {
-  self->request(self->state.m.agent, timeout, atom::get_v, atom::neighbors_v)
+/// Asks `dest` for its table `what` (rows of type Row) and replies with the
+/// rows as a JSON array.
+template <class Row, class Handle, class Atom>
+void reply_rows(control_impl self, const Handle& dest, Atom what, ms timeout,
+                reply_promise rp) {
+  self->request(dest, timeout, atom::get_v, what)
     .then(
-      [rp](std::vector<neighbour_info>& ns) mutable {
-        json rows = json::array();
-        for (auto& n : ns)
-          rows.push_back(to_json(n));
-        rp.deliver(ok_reply(std::move(rows)));
-      },
-      fail_with(rp));
-}
-
-void cmd_apps(control_impl self, ms timeout, reply_promise rp) {
-  self->request(self->state.m.apps, timeout, atom::get_v, atom::apps_v)
-    .then(
-      [rp](std::vector<apo_info>& apps) mutable {
-        json rows = json::array();
-        for (auto& a : apps)
-          rows.push_back(to_json(a));
-        rp.deliver(ok_reply(std::move(rows)));
+      [rp](std::vector<Row>& rows) mutable {
+        rp.deliver(ok_reply(rows_json(rows)));
       },
       fail_with(rp));
 }
@@ -861,9 +555,10 @@ void dispatch(control_impl self, const std::string& text, reply_promise rp) {
   else if (cmd == "routes")
     cmd_routes(self, req, timeout, rp);
   else if (cmd == "neighbors" || cmd == "neighbours")
-    cmd_neighbors(self, timeout, rp);
+    reply_rows<neighbour_info>(self, self->state.m.agent, atom::neighbors_v,
+                               timeout, rp);
   else if (cmd == "apps")
-    cmd_apps(self, timeout, rp);
+    reply_rows<apo_info>(self, self->state.m.apps, atom::apps_v, timeout, rp);
   else if (cmd == "stats")
     cmd_stats(self, timeout, rp);
   else if (cmd == "echo")

@@ -12,6 +12,7 @@
 // wakes every thread through the stop pipe and joins them.
 
 #include "actors/control.hpp"
+#include "actors/control_json.hpp"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -45,6 +46,7 @@ namespace herm {
 namespace {
 
 using json = nlohmann::json;
+using control_json::error_reply;
 using clock_type = std::chrono::steady_clock;
 
 /// Longest request or reply line, newline excluded.
@@ -70,11 +72,6 @@ constexpr std::chrono::seconds drain_time{5};
 
 std::string errno_text(int err) {
   return std::strerror(err);
-}
-
-std::string reply_error(const std::string& code, const std::string& message) {
-  return json{{"ok", false}, {"error", {{"code", code}, {"message", message}}}}
-    .dump(-1, ' ', false, json::error_handler_t::replace);
 }
 
 /// Fills `addr` for `path`; false if the path does not fit.
@@ -243,7 +240,7 @@ private:
   /// Answers a client that cannot be served with one error line, closes it.
   void refuse(int fd, const std::string& why) {
     ++clients_refused_;
-    write_all(fd, reply_error("busy", why) + '\n',
+    write_all(fd, error_reply("busy", why) + '\n',
               clock_type::now() + std::chrono::milliseconds(100));
     ::close(fd);
   }
@@ -272,7 +269,7 @@ private:
       if (buf.size() > max_line) {
         ++lines_too_long_;
         write_all(fd,
-                  reply_error("invalid_request",
+                  error_reply("invalid_request",
                               "request line longer than "
                                 + std::to_string(max_line) + " bytes")
                     + '\n',
@@ -288,7 +285,7 @@ private:
           ++clients_timed_out_;
           if (partial)
             write_all(fd,
-                      reply_error("timeout",
+                      error_reply("timeout",
                                   "request line not complete within "
                                     + std::to_string(line_deadline.count())
                                     + " s")
@@ -349,7 +346,7 @@ private:
     try {
       auto req = json::parse(line, nullptr, false);
       if (req.is_discarded() || !req.is_object())
-        return reply_error("invalid_request",
+        return error_reply("invalid_request",
                            "a request is one JSON object with a \"cmd\"");
       auto cmd = req.find("cmd");
       auto here = req.count("module") == 0;
@@ -368,12 +365,12 @@ private:
         if (!j.is_discarded() && j.value("ok", false)
             && j["result"].is_object()) {
           j["result"]["control_socket"] = counters();
-          return j.dump(-1, ' ', false, json::error_handler_t::replace);
+          return control_json::dump(j);
         }
       }
       return reply;
     } catch (const std::exception& e) {
-      return reply_error("internal", e.what());
+      return error_reply("internal", e.what());
     }
   }
 
@@ -391,7 +388,7 @@ private:
               [result](caf::error& err) {
                 auto timed_out
                   = err == caf::make_error(caf::sec::request_timeout);
-                result->set_value(reply_error(
+                result->set_value(error_reply(
                   timed_out ? "timeout" : "unavailable",
                   timed_out ? "the control service did not answer in time"
                             : "control service: " + render(err)));
@@ -402,14 +399,14 @@ private:
       pollfd p{stop_read_, POLLIN, 0};
       if (::poll(&p, 1, 50) > 0) {
         caf::anon_send_exit(helper, caf::exit_reason::user_shutdown);
-        return reply_error("unavailable", "the control socket is closing");
+        return error_reply("unavailable", "the control socket is closing");
       }
     }
     try {
       return answer.get();
     } catch (const std::future_error&) {
       // The helper ended without an answer (the actor system stops).
-      return reply_error("unavailable", "the control service is stopping");
+      return error_reply("unavailable", "the control service is stopping");
     }
   }
 

@@ -14,14 +14,10 @@
 // reply, 2 bad usage, 3 no module to talk to (nothing listening at the
 // socket, or no reply in time). Errors are one line on stderr.
 
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cmath>
 #include <cstdlib>
-#include <cstring>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <optional>
@@ -37,6 +33,9 @@
 #include "actors/config.hpp"
 #include "actors/control.hpp"
 #include "actors/runtime/error.hpp"
+#include "apps/hermctl/format.hpp"
+#include "apps/hermctl/graphviz.hpp"
+#include "apps/hermctl/views.hpp"
 #include "channels/link_profile.hpp"
 #include "routing/metric.hpp"
 #include "routing/module_id.hpp"
@@ -45,6 +44,8 @@
 using json = nlohmann::json;
 
 namespace {
+
+using namespace hermctl;
 
 enum exit_status : int {
   exit_ok = 0,
@@ -132,296 +133,26 @@ private:
   uint32_t timeout_ms_;
 };
 
-// -- formatting -------------------------------------------------------------------------
-
-/// A field as text: strings as they are, numbers as numbers, null as "-".
-std::string text(const json& v) {
-  if (v.is_null())
-    return "-";
-  if (v.is_string())
-    return v.get<std::string>();
-  if (v.is_boolean())
-    return v.get<bool>() ? "yes" : "no";
-  return v.dump();
-}
-
-std::string text(const json& obj, const char* key) {
-  auto i = obj.find(key);
-  return i == obj.end() ? "-" : text(*i);
-}
-
-std::string cost_text(const json& v) {
-  return v.is_null() ? "inf" : text(v);
-}
-
-std::string number(double x) {
-  std::ostringstream out;
-  out << x;
-  return out.str();
-}
-
-std::string bandwidth_text(uint64_t bps) {
-  if (bps >= 1'000'000'000 && bps % 100'000'000 == 0)
-    return number(double(bps) / 1e9) + " Gbit/s";
-  if (bps >= 1'000'000)
-    return number(double(bps) / 1e6) + " Mbit/s";
-  if (bps >= 1'000)
-    return number(double(bps) / 1e3) + " kbit/s";
-  return std::to_string(bps) + " bit/s";
-}
-
-std::string duration_text(uint64_t ms) {
-  auto s = ms / 1000;
-  std::ostringstream out;
-  if (s >= 86400)
-    out << s / 86400 << "d ";
-  if (s >= 3600)
-    out << (s % 86400) / 3600 << "h ";
-  if (s >= 60)
-    out << (s % 3600) / 60 << "m ";
-  out << s % 60 << "s";
-  return out.str();
-}
-
-/// Columns separated by two spaces, each as wide as its widest cell.
-void print_table(const std::vector<std::string>& header,
-                 const std::vector<std::vector<std::string>>& rows) {
-  std::vector<size_t> width(header.size(), 0);
-  auto measure = [&](const std::vector<std::string>& row) {
-    for (size_t i = 0; i < row.size() && i < width.size(); ++i)
-      width[i] = std::max(width[i], row[i].size());
-  };
-  measure(header);
-  for (auto& r : rows)
-    measure(r);
-  auto print = [&](const std::vector<std::string>& row) {
-    std::string line;
-    for (size_t i = 0; i < row.size() && i < width.size(); ++i) {
-      line += row[i];
-      if (i + 1 < row.size())
-        line += std::string(width[i] - row[i].size() + 2, ' ');
-    }
-    std::cout << line << '\n';
-  };
-  print(header);
-  for (auto& r : rows)
-    print(r);
-}
-
-/// "key  value" lines, keys aligned, indented by `indent`.
-void print_pairs(const std::vector<std::pair<std::string, std::string>>& pairs,
-                 const std::string& indent = "") {
-  size_t w = 0;
-  for (auto& kv : pairs)
-    w = std::max(w, kv.first.size());
-  for (auto& kv : pairs)
-    std::cout << indent << kv.first << std::string(w - kv.first.size() + 2, ' ')
-              << kv.second << '\n';
-}
-
-void print_json(const json& j) {
-  std::cout << j.dump(2, ' ', false, json::error_handler_t::replace) << '\n';
-}
-
-uint32_t mid_number(const json& v) {
-  if (!v.is_string())
-    return 0x10000;
-  auto id = herm::parse_module_id(v.get<std::string>());
-  return id ? *id : 0x10000;
-}
-
 // -- commands ---------------------------------------------------------------------------
 
-int cmd_info(client& c, const options& o, herm::module_id m) {
-  auto r = c.call({{"cmd", "info"}}, m);
-  if (o.json_out) {
-    print_json(r);
-    return exit_ok;
-  }
-  auto inst = r.value("instance", uint64_t{0});
-  std::ostringstream instance;
-  instance << "0x" << std::hex << inst;
-  auto apps = r.value("apps", json::object());
-  auto channels = r.value("channels", json::object());
-  print_pairs({
-    {"module", text(r, "name") + " (" + text(r, "module") + ")"},
-    {"instance", instance.str()},
-    {"uptime", duration_text(r.value("uptime_ms", uint64_t{0}))},
-    {"routing", text(r, "reachable") + " modules reachable, "
-                  + text(r, "neighbours") + " neighbours"},
-    {"channels", text(channels, "up") + " up of " + text(channels, "total")},
-    {"apps", text(apps, "local") + " local, " + text(apps, "known_remote")
-               + " known remote, " + text(apps, "bindings") + " bindings"},
-    {"control", r.value("registered", std::string{}) == "yes"
-                  ? std::string{"registered as herm.control"}
-                  : "not registered: " + text(r, "registered")},
-  });
+/// Runs request `req` on module `m`: with --json prints the result as it
+/// is, else `view` prints it for people.
+int show(client& c, const options& o, herm::module_id m, json req,
+         const std::function<void(std::ostream&, const json&)>& view) {
+  auto r = c.call(std::move(req), m);
+  if (o.json_out)
+    print_json(std::cout, r);
+  else
+    view(std::cout, r);
   return exit_ok;
-}
-
-int cmd_channels(client& c, const options& o, herm::module_id m) {
-  auto r = c.call({{"cmd", "channels"}}, m);
-  if (o.json_out) {
-    print_json(r);
-    return exit_ok;
-  }
-  std::vector<std::vector<std::string>> rows;
-  std::vector<std::string> notes;
-  for (auto& ch : r) {
-    auto p = ch.value("profile", json::object());
-    auto s = ch.value("stats", json{});
-    auto stat = [&](const char* k) { return s.is_object() ? text(s, k) : "-"; };
-    std::string dropped = "-";
-    if (s.is_object())
-      dropped = std::to_string(s.value("tx_dropped", uint64_t{0})
-                               + s.value("rx_malformed", uint64_t{0})
-                               + s.value("rx_reassembly_dropped", uint64_t{0}));
-    auto bps = p.value("bandwidth_bps", uint64_t{0});
-    rows.push_back({text(ch, "id"), text(ch, "device"), text(ch, "kind"),
-                    text(ch, "address"), text(ch, "state"), text(p, "name"),
-                    bps > 0 ? bandwidth_text(bps) : "-", text(p, "mtu"),
-                    cost_text(p.value("cost", json{})), stat("tx_packets"),
-                    stat("tx_bytes"), stat("rx_packets"), stat("rx_bytes"),
-                    dropped});
-    auto err = ch.value("last_error", std::string{});
-    if (!err.empty())
-      notes.push_back("channel " + text(ch, "id") + " (" + text(ch, "state")
-                      + "): " + err);
-  }
-  print_table({"ID", "DEVICE", "KIND", "ADDRESS", "STATE", "PROFILE",
-               "BANDWIDTH", "MTU", "COST", "TX PKTS", "TX BYTES", "RX PKTS",
-               "RX BYTES", "DROPPED"},
-              rows);
-  for (auto& n : notes)
-    std::cout << n << '\n';
-  return exit_ok;
-}
-
-std::string neighbour_text(const json& row) {
-  auto mod = row.value("neighbour_module", json{});
-  if (mod.is_string())
-    return mod.get<std::string>() + " (link " + text(row, "neighbour") + ")";
-  return "link " + text(row, "neighbour");
-}
-
-/// The routes to show: selected ones of class 0, or every row with `all`;
-/// by destination, class, selected first.
-json route_rows(const json& routes, bool all) {
-  std::vector<json> rows;
-  for (auto& r : routes)
-    if (all || (r.value("selected", false) && r.value("size_class", 0) == 0))
-      rows.push_back(r);
-  std::stable_sort(rows.begin(), rows.end(), [](const json& a, const json& b) {
-    auto ka = std::make_tuple(mid_number(a["destination"]),
-                              a.value("size_class", 0),
-                              !a.value("selected", false));
-    auto kb = std::make_tuple(mid_number(b["destination"]),
-                              b.value("size_class", 0),
-                              !b.value("selected", false));
-    return ka < kb;
-  });
-  return json(rows);
 }
 
 int cmd_routes(client& c, const options& o, herm::module_id m) {
   auto rows = route_rows(c.call({{"cmd", "routes"}, {"all", o.all}}, m), o.all);
-  if (o.json_out) {
-    print_json(rows);
-    return exit_ok;
-  }
-  std::vector<std::vector<std::string>> out;
-  for (auto& r : rows) {
-    std::vector<std::string> line{text(r, "destination")};
-    if (o.all)
-      line.push_back(text(r, "size_class") + " (" + text(r, "size_class_bytes")
-                     + " B)");
-    line.insert(line.end(),
-                {text(r, "channel"), neighbour_text(r),
-                 cost_text(r.value("cost", json{})), text(r, "hops"),
-                 r.value("forwarding", std::string{}).empty()
-                   ? std::string{"-"}
-                   : text(r, "forwarding")});
-    if (o.all) {
-      line.push_back(text(r, "selected"));
-      line.push_back(text(r, "feasible"));
-    }
-    out.push_back(std::move(line));
-  }
-  if (o.all)
-    print_table({"DESTINATION", "CLASS", "NEXT CHANNEL", "NEIGHBOUR", "COST",
-                 "HOPS", "FORWARDING", "SELECTED", "FEASIBLE"},
-                out);
+  if (o.json_out)
+    print_json(std::cout, rows);
   else
-    print_table({"DESTINATION", "NEXT CHANNEL", "NEIGHBOUR", "COST", "HOPS",
-                 "FORWARDING"},
-                out);
-  return exit_ok;
-}
-
-int cmd_neighbors(client& c, const options& o, herm::module_id m) {
-  auto r = c.call({{"cmd", "neighbors"}}, m);
-  if (o.json_out) {
-    print_json(r);
-    return exit_ok;
-  }
-  std::vector<std::vector<std::string>> rows;
-  for (auto& n : r) {
-    auto cost = n.value("cost", json::array());
-    rows.push_back({text(n, "module"), text(n, "channel"),
-                    text(n, "link_address"), text(n, "link_kind"),
-                    cost.empty() ? "-" : cost_text(cost[0]),
-                    text(n, "last_heard_ms") + " ms"});
-  }
-  std::sort(rows.begin(), rows.end());
-  print_table({"MODULE", "CHANNEL", "LINK ADDRESS", "LINK", "COST",
-               "LAST HEARD"},
-              rows);
-  return exit_ok;
-}
-
-int cmd_apps(client& c, const options& o, herm::module_id m) {
-  auto r = c.call({{"cmd", "apps"}}, m);
-  if (o.json_out) {
-    print_json(r);
-    return exit_ok;
-  }
-  std::vector<std::vector<std::string>> rows;
-  for (auto& a : r) {
-    bool local = a.value("local", false);
-    rows.push_back(
-      {text(a, "module"), text(a, "apo"), text(a, "name"), text(a, "type"),
-       local ? "local" : "remote",
-       local ? "watched by " + text(a, "watchers") + " modules"
-             : "heard " + number(a.value("age_ms", 0) / 1000.0) + " s ago"});
-  }
-  print_table({"MODULE", "APO", "NAME", "TYPE", "WHERE", "STATE"}, rows);
-  return exit_ok;
-}
-
-int cmd_stats(client& c, const options& o, herm::module_id m) {
-  auto r = c.call({{"cmd", "stats"}}, m);
-  if (o.json_out) {
-    print_json(r);
-    return exit_ok;
-  }
-  auto section = [](const std::string& title, const json& obj) {
-    std::cout << title << '\n';
-    std::vector<std::pair<std::string, std::string>> pairs;
-    for (auto& [k, v] : obj.items())
-      if (k != "id" && k != "device" && k != "state")
-        pairs.emplace_back(k, text(v));
-    print_pairs(pairs, "  ");
-  };
-  section("routing", r.value("routing", json::object()));
-  section("apps", r.value("apps", json::object()));
-  // Only the local socket has one: a module reached with --module answers
-  // without it.
-  if (r.contains("control_socket"))
-    section("control socket", r["control_socket"]);
-  for (auto& ch : r.value("channels", json::array()))
-    section("channel " + text(ch, "id") + " (" + text(ch, "device") + ", "
-              + text(ch, "state") + ")",
-            ch);
+    show_routes(std::cout, rows, o.all);
   return exit_ok;
 }
 
@@ -433,22 +164,13 @@ int cmd_ping(client& c, const options& o) {
                    {"module", herm::to_hex(target)},
                    {"count", o.count}});
   if (o.json_out) {
-    print_json(r);
+    print_json(std::cout, r);
     return r.value("received", 0) > 0 ? exit_ok : exit_failed;
   }
-  std::cout << "PING " << herm::to_hex(target) << ": " << o.count
-            << " echoes to its control service\n";
-  auto rtts = r.value("rtt_us", json::array());
-  for (size_t i = 0; i < rtts.size(); ++i)
-    std::cout << "echo " << i + 1 << ": " << text(rtts[i]) << " us\n";
-  std::cout << text(r, "count") << " sent, " << text(r, "received")
-            << " received, " << text(r, "lost") << " lost";
-  if (!rtts.empty())
-    std::cout << "; rtt min/avg/max = " << text(r, "min_us") << "/"
-              << text(r, "avg_us") << "/" << text(r, "max_us") << " us";
-  std::cout << '\n';
-  return rtts.empty() ? exit_failed : exit_ok;
+  show_ping(std::cout, r, herm::to_hex(target), o.count);
+  return r.value("rtt_us", json::array()).empty() ? exit_failed : exit_ok;
 }
+
 
 /// One hop of a trace.
 struct hop {
@@ -530,7 +252,7 @@ int cmd_trace(client& c, const options& o) {
     current = *next;
   }
   if (o.json_out) {
-    print_json(trace);
+    print_json(std::cout, trace);
     return exit_ok;
   }
   std::cout << "trace to " << herm::to_hex(dst) << ": " << hops.size() - 1
@@ -540,67 +262,11 @@ int cmd_trace(client& c, const options& o) {
     rows.push_back({std::to_string(i), herm::to_hex(hops[i].id),
                     hops[i].name.empty() ? "-" : hops[i].name, hops[i].link,
                     hops[i].channel, hops[i].cost, hops[i].rtt});
-  print_table({"HOP", "MODULE", "NAME", "LINK", "VIA CHANNEL", "COST", "RTT"},
+  print_table(std::cout, {"HOP", "MODULE", "NAME", "LINK", "VIA CHANNEL", "COST", "RTT"},
               rows);
   return exit_ok;
 }
 
-std::string dot_escape(const std::string& s) {
-  std::string out;
-  for (char ch : s) {
-    if (ch == '"' || ch == '\\')
-      out += '\\';
-    if (ch == '\n')
-      continue;
-    out += ch;
-  }
-  return out;
-}
-
-/// True if `dot` (graphviz) is an executable on PATH.
-bool have_dot() {
-  auto* path = std::getenv("PATH");
-  if (path == nullptr)
-    return false;
-  std::istringstream dirs{path};
-  for (std::string dir; std::getline(dirs, dir, ':');)
-    if (!dir.empty() && ::access((dir + "/dot").c_str(), X_OK) == 0)
-      return true;
-  return false;
-}
-
-/// Runs `dot -T<format> -o file` with `graph` on its stdin.
-void render_dot(const std::string& graph, const std::string& format,
-                const std::string& file) {
-  int fds[2];
-  if (::pipe(fds) != 0)
-    throw failure{exit_failed, "cannot run dot: pipe failed"};
-  auto pid = ::fork();
-  if (pid < 0)
-    throw failure{exit_failed, "cannot run dot: fork failed"};
-  if (pid == 0) {
-    ::dup2(fds[0], STDIN_FILENO);
-    ::close(fds[0]);
-    ::close(fds[1]);
-    auto fmt = "-T" + format;
-    ::execlp("dot", "dot", fmt.c_str(), "-o", file.c_str(),
-             static_cast<char*>(nullptr));
-    ::_exit(127);
-  }
-  ::close(fds[0]);
-  size_t done = 0;
-  while (done < graph.size()) {
-    auto n = ::write(fds[1], graph.data() + done, graph.size() - done);
-    if (n <= 0)
-      break;
-    done += static_cast<size_t>(n);
-  }
-  ::close(fds[1]);
-  int st = 0;
-  ::waitpid(pid, &st, 0);
-  if (!WIFEXITED(st) || WEXITSTATUS(st) != 0)
-    throw failure{exit_failed, "dot -T" + format + " failed writing " + file};
-}
 
 int cmd_topology(client& c, const options& o) {
   auto me = c.call({{"cmd", "echo"}});
@@ -647,7 +313,7 @@ int cmd_topology(client& c, const options& o) {
                             {"b", herm::to_hex(std::get<1>(key))},
                             {"link_kind", std::get<2>(key)},
                             {"cost", cost}});
-    print_json(j);
+    print_json(std::cout, j);
     return exit_ok;
   }
   std::ostringstream dot;
@@ -686,7 +352,8 @@ int cmd_topology(client& c, const options& o) {
                                    + ": graphviz's 'dot' is not on PATH "
                                      "(install graphviz, or write --dot FILE "
                                      "and render it elsewhere)"};
-    render_dot(graph, format, file);
+    if (auto err = render_dot(graph, format, file))
+      throw failure{exit_failed, *err};
     std::cout << "wrote " << file << summary << '\n';
   }
   return exit_ok;
@@ -707,48 +374,20 @@ int cmd_profiles(const options& o) {
                     p.multi_access ? "bus" : "point-to-point"});
   }
   if (o.json_out)
-    print_json(j);
+    print_json(std::cout, j);
   else
-    print_table({"NAME", "BANDWIDTH", "MTU", "COST", "ACCESS"}, rows);
+    print_table(std::cout, {"NAME", "BANDWIDTH", "MTU", "COST", "ACCESS"}, rows);
   return exit_ok;
 }
 
-/// "1000000", "1M", "12Mbit", "19.2k", "400M", "1.5G" (bit/s).
-uint64_t parse_bandwidth(const std::string& s) {
-  size_t used = 0;
-  double x = 0;
-  try {
-    x = std::stod(s, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  auto unit = s.substr(used);
-  for (auto suffix : {"bit/s", "bps", "bit", "b/s"})
-    if (unit.size() >= std::strlen(suffix)
-        && unit.compare(unit.size() - std::strlen(suffix), std::string::npos,
-                        suffix)
-             == 0) {
-      unit.resize(unit.size() - std::strlen(suffix));
-      break;
-    }
-  double scale = 0;
-  if (unit.empty())
-    scale = 1;
-  else if (unit == "k" || unit == "K")
-    scale = 1e3;
-  else if (unit == "M")
-    scale = 1e6;
-  else if (unit == "G")
-    scale = 1e9;
-  if (used == 0 || scale == 0 || !(x > 0) || x * scale > 1e15)
-    throw failure{exit_usage, "--bandwidth '" + s
-                                + "' is not a bit rate (such as 1000000, 1M, "
-                                  "19.2k)"};
-  return static_cast<uint64_t>(std::llround(x * scale));
-}
 
 int cmd_cost(const options& o) {
-  auto bps = parse_bandwidth(o.bandwidth);
+  auto parsed = parse_bandwidth(o.bandwidth);
+  if (!parsed)
+    throw failure{exit_usage, "--bandwidth '" + o.bandwidth
+                                + "' is not a bit rate (such as 1000000, 1M, "
+                                  "19.2k)"};
+  auto bps = *parsed;
   if (!(o.coef > 0))
     throw failure{exit_usage, "--coef must be above 0"};
   if (o.size > 0 && o.mtu == 0)
@@ -789,61 +428,12 @@ int cmd_cost(const options& o) {
     pairs.emplace_back("size classes", per_class);
   }
   if (o.json_out)
-    print_json(j);
+    print_json(std::cout, j);
   else
-    print_pairs(pairs);
+    print_pairs(std::cout, pairs);
   return exit_ok;
 }
 
-int cmd_link(client& c, const options& o, herm::module_id m) {
-  if (o.state != "up" && o.state != "down")
-    throw failure{exit_usage, "link state must be 'up' or 'down', got '"
-                                + o.state + "'"};
-  auto r = c.call({{"cmd", "link"}, {"device", o.device}, {"state", o.state}},
-                  m);
-  if (o.json_out) {
-    print_json(r);
-    return exit_ok;
-  }
-  auto ids = [](const json& a) {
-    std::string s;
-    for (auto& x : a)
-      s += (s.empty() ? "" : ", ") + text(x);
-    return s;
-  };
-  if (o.state == "down") {
-    auto closed = r.value("closed", json::array());
-    std::cout << o.device << ": down"
-              << (closed.empty() ? std::string{" (no channel was open)"}
-                                 : " (closed channel " + ids(closed) + ")")
-              << '\n';
-  } else {
-    auto chans = r.value("channels", json::array());
-    std::cout << o.device << ": "
-              << (r.value("opened", false) ? "up (opened channel "
-                                           : "already up (channel ")
-              << ids(chans) << ")\n";
-  }
-  return exit_ok;
-}
-
-int cmd_reload(client& c, const options& o, herm::module_id m) {
-  auto r = c.call({{"cmd", "reload"}}, m);
-  if (o.json_out) {
-    print_json(r);
-    return exit_ok;
-  }
-  std::cout << "reloaded\n";
-  if (r.is_object()) {
-    std::vector<std::pair<std::string, std::string>> pairs;
-    for (auto& [k, v] : r.items())
-      pairs.emplace_back(k, v.is_array() || v.is_object() ? v.dump() : text(v));
-    print_pairs(pairs, "  ");
-  } else if (!r.is_null()) {
-    std::cout << "  " << text(r) << '\n';
-  }
-  return exit_ok;
-}
 
 } // namespace
 
@@ -929,27 +519,35 @@ int main(int argc, char** argv) {
     }
     client c{path, o.timeout_ms};
     if (info->parsed())
-      return cmd_info(c, o, module);
+      return show(c, o, module, {{"cmd", "info"}}, show_info);
     if (channels->parsed())
-      return cmd_channels(c, o, module);
+      return show(c, o, module, {{"cmd", "channels"}}, show_channels);
     if (routes->parsed())
       return cmd_routes(c, o, module);
     if (neighbors->parsed())
-      return cmd_neighbors(c, o, module);
+      return show(c, o, module, {{"cmd", "neighbors"}}, show_neighbors);
     if (apps->parsed())
-      return cmd_apps(c, o, module);
+      return show(c, o, module, {{"cmd", "apps"}}, show_apps);
     if (stats->parsed())
-      return cmd_stats(c, o, module);
+      return show(c, o, module, {{"cmd", "stats"}}, show_stats);
     if (ping->parsed())
       return cmd_ping(c, o);
     if (trace->parsed())
       return cmd_trace(c, o);
     if (topology->parsed())
       return cmd_topology(c, o);
-    if (link->parsed())
-      return cmd_link(c, o, module);
+    if (link->parsed()) {
+      if (o.state != "up" && o.state != "down")
+        throw failure{exit_usage, "link state must be 'up' or 'down', got '"
+                                    + o.state + "'"};
+      return show(c, o, module,
+                  {{"cmd", "link"}, {"device", o.device}, {"state", o.state}},
+                  [&o](std::ostream& out, const json& r) {
+                    show_link(out, r, o.device, o.state);
+                  });
+    }
     if (reload->parsed())
-      return cmd_reload(c, o, module);
+      return show(c, o, module, {{"cmd", "reload"}}, show_reload);
     return exit_usage;
   } catch (const failure& f) {
     std::cout.flush();
