@@ -70,10 +70,10 @@ public:
       profile_(std::move(profile)) {
   }
 
+  /// Must not run inside the driver's own handler call (nor may the last
+  /// reference be dropped there).
   ~pair_driver() override {
     stop();
-    if (thread_.joinable())
-      thread_.join(); // stopped from its own handler: the loop has ended
     ::close(fd_);
     ::close(wake_fd_);
   }
@@ -93,7 +93,8 @@ public:
   void stop() override {
     std::lock_guard<std::mutex> guard{life_mtx_};
     started_ = true; // a stopped driver never starts
-    if (stopping_.exchange(true) || !thread_.joinable())
+    stopping_ = true;
+    if (!thread_.joinable())
       return;
     if (thread_.get_id() == std::this_thread::get_id())
       return; // from a handler: the loop ends when it returns
