@@ -259,6 +259,21 @@ public:
     return out;
   }
 
+  /// Calls `item(node, path, line)` for each entry of the list section `f`
+  /// ("channels[0]", ...); null is an empty list, anything else but a list
+  /// is refused as not `what`.
+  template <class F>
+  void each_item(const field& f, const std::string& what, F item) const {
+    if (f.value.IsNull())
+      return;
+    if (!f.value.IsSequence())
+      expected(f, what);
+    size_t i = 0;
+    for (auto node : f.value)
+      item(node, f.path + "[" + std::to_string(i++) + "]",
+           line_of(node, f.line()));
+  }
+
   // -- sections -------------------------------------------------------------
 
   void module(const field& f, file_config& cfg) const {
@@ -425,14 +440,8 @@ public:
   }
 
   void channels(const field& f, file_config& cfg) const {
-    if (f.value.IsNull())
-      return;
-    if (!f.value.IsSequence())
-      expected(f, "a list of channels");
-    size_t i = 0;
-    for (auto node : f.value) {
-      auto path = "channels[" + std::to_string(i++) + "]";
-      auto line = line_of(node, f.line());
+    each_item(f, "a list of channels", [&](const YAML::Node& node,
+                                            const std::string& path, int line) {
       auto fs = entries(node, path, line,
                         "a map with name, kind and interface");
       device_config dev;
@@ -470,18 +479,12 @@ public:
       }
       cfg.module.devices.push_back(std::move(dev));
       cfg.device_lines.push_back(line);
-    }
+    });
   }
 
   void apos(const field& f, file_config& cfg) const {
-    if (f.value.IsNull())
-      return;
-    if (!f.value.IsSequence())
-      expected(f, "a list of APOs");
-    size_t i = 0;
-    for (auto node : f.value) {
-      auto path = "apos[" + std::to_string(i++) + "]";
-      auto line = line_of(node, f.line());
+    each_item(f, "a list of APOs", [&](const YAML::Node& node,
+                                       const std::string& path, int line) {
       auto fs = entries(node, path, line, "a map with name and kind",
                         {"name", "kind", "type", "options"});
       apo_config apo;
@@ -507,7 +510,7 @@ public:
           apo.options[opt.path.substr(prefix)] = option(opt);
       }
       cfg.apos.push_back(std::move(apo));
-    }
+    });
   }
 
   file_config document(const YAML::Node& root) const {

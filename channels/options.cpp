@@ -9,6 +9,24 @@
 
 namespace herm {
 
+namespace {
+
+/// Marks `key` as read; its text, or nullptr when absent.
+const std::string* take(const device_config& cfg, std::set<std::string>& used,
+                        const std::string& key) {
+  used.insert(key);
+  auto i = cfg.options.find(key);
+  return i == cfg.options.end() ? nullptr : &i->second;
+}
+
+/// "option 'KEY' expects WHAT, got 'TEXT'".
+std::string expects(const std::string& key, const std::string& what,
+                    const std::string& text) {
+  return "option '" + key + "' expects " + what + ", got '" + text + "'";
+}
+
+} // namespace
+
 option_reader::option_reader(const device_config& cfg) : cfg_(cfg) {
   // Options every kind understands; reading them is optional.
 }
@@ -19,9 +37,8 @@ bool option_reader::has(const std::string& key) {
 }
 
 std::string option_reader::str(const std::string& key, std::string fallback) {
-  used_.insert(key);
-  auto i = cfg_.options.find(key);
-  return i == cfg_.options.end() ? fallback : i->second;
+  auto* text = take(cfg_, used_, key);
+  return text == nullptr ? fallback : *text;
 }
 
 caf::error option_reader::fail(ec code, const std::string& what) const {
@@ -31,11 +48,10 @@ caf::error option_reader::fail(ec code, const std::string& what) const {
 caf::expected<uint64_t> option_reader::u64(const std::string& key,
                                            uint64_t fallback, uint64_t min,
                                            uint64_t max) {
-  used_.insert(key);
-  auto i = cfg_.options.find(key);
-  if (i == cfg_.options.end())
+  auto* found = take(cfg_, used_, key);
+  if (found == nullptr)
     return fallback;
-  auto& text = i->second;
+  auto& text = *found;
   errno = 0;
   char* end = nullptr;
   auto val = text.empty() || text[0] == '-'
@@ -44,45 +60,42 @@ caf::expected<uint64_t> option_reader::u64(const std::string& key,
   if (text.empty() || text[0] == '-' || errno != 0 || *end != '\0' || val < min
       || val > max)
     return fail(ec::invalid_parameter,
-                "option '" + key + "' expects an integer in [" +
-                  std::to_string(min) + ", " + std::to_string(max) +
-                  "], got '" + text + "'");
+                expects(key, "an integer in [" + std::to_string(min) + ", "
+                               + std::to_string(max) + "]",
+                        text));
   return val;
 }
 
 caf::expected<double> option_reader::real(const std::string& key,
                                           double fallback, double min,
                                           double max) {
-  used_.insert(key);
-  auto i = cfg_.options.find(key);
-  if (i == cfg_.options.end())
+  auto* found = take(cfg_, used_, key);
+  if (found == nullptr)
     return fallback;
-  auto& text = i->second;
+  auto& text = *found;
   errno = 0;
   char* end = nullptr;
   auto val = std::strtod(text.c_str(), &end);
   if (text.empty() || errno != 0 || *end != '\0' || !std::isfinite(val)
       || val < min || val > max)
     return fail(ec::invalid_parameter,
-                "option '" + key + "' expects a number in [" +
-                  format_double(min) + ", " + format_double(max) +
-                  "], got '" + text + "'");
+                expects(key, "a number in [" + format_double(min) + ", "
+                               + format_double(max) + "]",
+                        text));
   return val;
 }
 
 caf::expected<bool> option_reader::flag(const std::string& key,
                                         bool fallback) {
-  used_.insert(key);
-  auto i = cfg_.options.find(key);
-  if (i == cfg_.options.end())
+  auto* found = take(cfg_, used_, key);
+  if (found == nullptr)
     return fallback;
-  auto& t = i->second;
+  auto& t = *found;
   if (t == "true" || t == "1" || t == "yes" || t == "on")
     return true;
   if (t == "false" || t == "0" || t == "no" || t == "off")
     return false;
-  return fail(ec::invalid_parameter,
-              "option '" + key + "' expects true or false, got '" + t + "'");
+  return fail(ec::invalid_parameter, expects(key, "true or false", t));
 }
 
 caf::expected<link_profile>

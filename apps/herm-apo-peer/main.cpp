@@ -502,6 +502,12 @@ int subscribe(caf::scoped_actor& self, const module_handles& m,
   return received == o.count ? 0 : 1;
 }
 
+/// Prints "error WHAT" (the line the tests read) and returns exit status 2.
+int refuse(const std::string& what) {
+  std::cout << "error " << what << std::endl;
+  return 2;
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -545,11 +551,8 @@ int main(int argc, char** argv) {
 
   module_config mc;
   auto id = parse_module_id(o.id);
-  if (!id || !is_unicast(*id) || *id >= first_dynamic_module) {
-    std::cout << "error --id '" << o.id << "' is not a static module id"
-              << std::endl;
-    return 2;
-  }
+  if (!id || !is_unicast(*id) || *id >= first_dynamic_module)
+    return refuse("--id '" + o.id + "' is not a static module id");
   mc.routing.id = *id;
   mc.routing.hello_interval = std::chrono::milliseconds(o.hello_ms);
   mc.apps.unreachable_grace = 500ms;
@@ -564,38 +567,26 @@ int main(int argc, char** argv) {
     = std::min(mc.apps.retransmit_initial, mc.apps.retransmit_max);
   for (auto& arg : o.udp) {
     auto dev = parse_udp(arg, mc.devices.size());
-    if (!dev) {
-      std::cout << "error --udp '" << arg << "' is not LOCAL=PEER[,PEER...]"
-                << std::endl;
-      return 2;
-    }
+    if (!dev)
+      return refuse("--udp '" + arg + "' is not LOCAL=PEER[,PEER...]");
     mc.devices.push_back(std::move(*dev));
   }
   for (auto& arg : o.emu) {
     auto dev = parse_emu(arg, mc.devices.size());
-    if (!dev) {
-      std::cout << "error --emu '" << arg << "' is not DIR:PROFILE:STATION"
-                << std::endl;
-      return 2;
-    }
+    if (!dev)
+      return refuse("--emu '" + arg + "' is not DIR:PROFILE:STATION");
     for (auto& kv : o.emu_opts) {
       auto eq = kv.find('=');
-      if (eq == std::string::npos || eq == 0) {
-        std::cout << "error --emu-opt '" << kv << "' is not KEY=VALUE"
-                  << std::endl;
-        return 2;
-      }
+      if (eq == std::string::npos || eq == 0)
+        return refuse("--emu-opt '" + kv + "' is not KEY=VALUE");
       dev->options[kv.substr(0, eq)] = kv.substr(eq + 1);
     }
     mc.devices.push_back(std::move(*dev));
   }
   double flap_after = 0, flap_len = 0;
   std::string flap_device;
-  if (!o.flap.empty() && !parse_flap(o.flap, flap_after, flap_len, flap_device)) {
-    std::cout << "error --flap '" << o.flap << "' is not AFTER:FOR[:DEVICE]"
-              << std::endl;
-    return 2;
-  }
+  if (!o.flap.empty() && !parse_flap(o.flap, flap_after, flap_len, flap_device))
+    return refuse("--flap '" + o.flap + "' is not AFTER:FOR[:DEVICE]");
   std::signal(SIGTERM, [](int) { stop_requested = true; });
   std::signal(SIGINT, [](int) { stop_requested = true; });
 
@@ -603,10 +594,8 @@ int main(int argc, char** argv) {
   configure(cfg);
   caf::actor_system sys{cfg};
   auto m = start_module(sys, mc);
-  if (!m) {
-    std::cout << "error " << render(m.error()) << std::endl;
-    return 2;
-  }
+  if (!m)
+    return refuse(render(m.error()));
   std::thread flapper;
   if (flap_len > 0) {
     std::string loss = "0";

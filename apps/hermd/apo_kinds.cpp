@@ -33,11 +33,17 @@ std::string where(const apo_config& cfg) {
   return "APO '" + cfg.name + "'" + (cfg.line > 0 ? " (line " + std::to_string(cfg.line) + ")" : "");
 }
 
-caf::expected<uint64_t> u64_option(const apo_config& cfg, const std::string& key,
-                                   uint64_t fallback, uint64_t min, uint64_t max) {
+/// Reads option `key` (an integer in [min, max], `fallback` when absent)
+/// into `out`; an error naming the APO and the option when it is not one,
+/// `out` then unchanged.
+caf::error u64_option(const apo_config& cfg, const std::string& key,
+                      uint64_t fallback, uint64_t min, uint64_t max,
+                      uint64_t& out) {
   auto i = cfg.options.find(key);
-  if (i == cfg.options.end())
-    return fallback;
+  if (i == cfg.options.end()) {
+    out = fallback;
+    return caf::none;
+  }
   char* end = nullptr;
   errno = 0;
   auto v = std::strtoull(i->second.c_str(), &end, 10);
@@ -46,7 +52,8 @@ caf::expected<uint64_t> u64_option(const apo_config& cfg, const std::string& key
                       where(cfg) + ": option '" + key + "' expects an integer in ["
                         + std::to_string(min) + ", " + std::to_string(max)
                         + "], got '" + i->second + "'");
-  return v;
+  out = v;
+  return caf::none;
 }
 
 std::string str_option(const apo_config& cfg, const std::string& key,
@@ -203,14 +210,10 @@ caf::expected<sonar_options> sonar_opts(const apo_config& cfg) {
     return make_error(ec::invalid_config,
                       where(cfg) + ": option 'device' (the serial line to the "
                                    "SRF04 board) is required");
-  auto baud = u64_option(cfg, "baud", 9600, 50, 4000000);
-  auto batch = u64_option(cfg, "batch", 10, 1, 1000);
-  if (!baud)
-    return baud.error();
-  if (!batch)
-    return batch.error();
-  o.baud = *baud;
-  o.batch = *batch;
+  if (auto err = u64_option(cfg, "baud", 9600, 50, 4000000, o.baud))
+    return err;
+  if (auto err = u64_option(cfg, "batch", 10, 1, 1000, o.batch))
+    return err;
   o.target = str_option(cfg, "target", "collector");
   return o;
 }
@@ -377,14 +380,10 @@ caf::expected<vision_options> vision_opts(const apo_config& cfg) {
   if (auto err = only_options(cfg, {"period_ms", "bytes", "target"}))
     return err;
   vision_options o;
-  auto period = u64_option(cfg, "period_ms", 60000, 1, 86400000);
-  auto bytes = u64_option(cfg, "bytes", 100, 0, 60000);
-  if (!period)
-    return period.error();
-  if (!bytes)
-    return bytes.error();
-  o.period_ms = *period;
-  o.bytes = *bytes;
+  if (auto err = u64_option(cfg, "period_ms", 60000, 1, 86400000, o.period_ms))
+    return err;
+  if (auto err = u64_option(cfg, "bytes", 100, 0, 60000, o.bytes))
+    return err;
   o.target = str_option(cfg, "target", "collector");
   return o;
 }

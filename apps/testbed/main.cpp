@@ -64,6 +64,10 @@ struct child {
   std::vector<std::string> lines;
 };
 
+bool has(const std::string& line, const std::string& what) {
+  return line.find(what) != std::string::npos;
+}
+
 class testbed {
 public:
   testbed(std::string bin_dir, bool quiet)
@@ -177,6 +181,20 @@ public:
     }
   }
 
+  /// wait_line for a line holding every one of `parts`, then the event
+  /// `event_name`: ok with the line found, failed with `missing` when none
+  /// came in time.
+  void expect_line(const std::string& event_name, const std::string& name,
+                   size_t from, std::chrono::milliseconds timeout,
+                   const std::vector<std::string>& parts,
+                   const std::string& missing) {
+    auto found = wait_line(name, from, [&parts](const std::string& l) {
+      return std::all_of(parts.begin(), parts.end(),
+                         [&l](const std::string& p) { return has(l, p); });
+    }, timeout);
+    event(found.has_value(), event_name, found ? *found : missing);
+  }
+
   const std::string& line(const std::string& name, size_t i) const {
     return children_.at(name).lines.at(i);
   }
@@ -279,10 +297,6 @@ private:
   int failed_ = 0;
   int events_ = 0;
 };
-
-bool has(const std::string& line, const std::string& what) {
-  return line.find(what) != std::string::npos;
-}
 
 std::string exe_dir() {
   std::error_code ec;
@@ -480,11 +494,9 @@ apos:
 
   // -- 2. steady state ------------------------------------------------------------------
   tb.say("steady state: sonar batches over RS232C, vision data through mobile");
-  auto batch = tb.wait_line("main", 0, [](const std::string& l) {
-    return has(l, "collector: sonar batch");
-  }, long_wait);
-  tb.event(batch.has_value(), "sonar_batch_received",
-           batch ? *batch : "no sonar batch reached the collector");
+  tb.expect_line("sonar_batch_received", "main", 0, long_wait,
+                 {"collector: sonar batch"},
+                 "no sonar batch reached the collector");
   // Readings taken before the sensor's APO was bound to the collector are
   // held, not dropped: batch 1 arrives too.
   auto first_batch = tb.wait_line("main", 0, [](const std::string& l) {
@@ -508,21 +520,15 @@ apos:
         after = i;
   // Batch 1 may leave before the RS232C route is selected (it is held
   // until the binding is made, not dropped): a later batch takes it.
-  auto rs = tb.wait_line("sensor", after, [](const std::string& l) {
-    return has(l, "packet 0x40->0x4E") && has(l, "via rs232c") && has(l, "fragmented");
-  }, long_wait);
-  tb.event(rs.has_value(), "sonar_batch_fragmented_on_rs232c",
-           rs ? *rs : "no fragmented RS232C packet from the sensor module");
-  auto fwd = tb.wait_line("mobile", 0, [](const std::string& l) {
-    return has(l, "packet 0x30->0x4E") && has(l, "forwarded via ethernet");
-  }, 10s);
-  tb.event(fwd.has_value(), "vision_routed_through_mobile",
-           fwd ? *fwd : "mobile forwarded no vision packet over Ethernet");
-  auto frame = tb.wait_line("main", 0, [](const std::string& l) {
-    return has(l, "collector: vision frame");
-  }, 10s);
-  tb.event(frame.has_value(), "vision_frame_received",
-           frame ? *frame : "no vision frame reached the collector");
+  tb.expect_line("sonar_batch_fragmented_on_rs232c", "sensor", after, long_wait,
+                 {"packet 0x40->0x4E", "via rs232c", "fragmented"},
+                 "no fragmented RS232C packet from the sensor module");
+  tb.expect_line("vision_routed_through_mobile", "mobile", 0, 10s,
+                 {"packet 0x30->0x4E", "forwarded via ethernet"},
+                 "mobile forwarded no vision packet over Ethernet");
+  tb.expect_line("vision_frame_received", "main", 0, 10s,
+                 {"collector: vision frame"},
+                 "no vision frame reached the collector");
 
   // -- 3. mobile dies -----------------------------------------------------------------------
   tb.say("killing the mobile module (SIGKILL: no goodbye)");
@@ -530,50 +536,38 @@ apos:
   auto m_vision = tb.mark("vision");
   tb.signal("mobile", SIGKILL);
   tb.reap("mobile", 5s);
-  auto withdrawn = tb.wait_line("main", m_main, [](const std::string& l) {
-    return has(l, "route to 0x30 withdrawn");
-  }, 10s);
-  tb.event(withdrawn.has_value(), "routes_withdrawn",
-           withdrawn ? *withdrawn : "main kept its route to vision");
-  auto failing = tb.wait_line("vision", m_vision, [](const std::string& l) {
-    return has(l, "vision frame") && has(l, "failed");
-  }, 10s);
-  tb.event(failing.has_value(), "vision_fails_without_mobile",
-           failing ? *failing : "vision saw no failure");
+  tb.expect_line("routes_withdrawn", "main", m_main, 10s,
+                 {"route to 0x30 withdrawn"},
+                 "main kept its route to vision");
+  tb.expect_line("vision_fails_without_mobile", "vision", m_vision, 10s,
+                 {"vision frame", "failed"},
+                 "vision saw no failure");
   tb.say("restarting the mobile module");
   m_main = tb.mark("main");
   tb.restart("mobile");
-  auto resumed = tb.wait_line("main", m_main, [](const std::string& l) {
-    return has(l, "collector: vision frame");
-  }, 20s);
-  tb.event(resumed.has_value(), "vision_resumes",
-           resumed ? *resumed : "vision data did not come back");
+  tb.expect_line("vision_resumes", "main", m_main, 20s,
+                 {"collector: vision frame"},
+                 "vision data did not come back");
 
   // -- 4. Ethernet down -----------------------------------------------------------------------
   tb.say("taking mobile's Ethernet link down: traffic moves to the CAN bus");
   auto m_mobile = tb.mark("mobile");
   m_main = tb.mark("main");
   ctl("mobile", {"link", "eth0", "down"});
-  auto via_can = tb.wait_line("mobile", m_mobile, [](const std::string& l) {
-    return has(l, "packet 0x30->0x4E") && has(l, "forwarded via can2.0");
-  }, 20s);
-  tb.event(via_can.has_value(), "traffic_moves_to_can",
-           via_can ? *via_can : "mobile did not forward vision data over CAN");
-  auto over_can = tb.wait_line("main", m_main, [](const std::string& l) {
-    return has(l, "collector: vision frame");
-  }, 20s);
-  tb.event(over_can.has_value(), "vision_over_can_received",
-           over_can ? *over_can : "no vision frame arrived over CAN");
+  tb.expect_line("traffic_moves_to_can", "mobile", m_mobile, 20s,
+                 {"packet 0x30->0x4E", "forwarded via can2.0"},
+                 "mobile did not forward vision data over CAN");
+  tb.expect_line("vision_over_can_received", "main", m_main, 20s,
+                 {"collector: vision frame"},
+                 "no vision frame arrived over CAN");
   tb.say("main's routes now");
   ctl("main", {"routes"});
   tb.say("bringing Ethernet back");
   m_mobile = tb.mark("mobile");
   ctl("mobile", {"link", "eth0", "up"});
-  auto back = tb.wait_line("mobile", m_mobile, [](const std::string& l) {
-    return has(l, "packet 0x30->0x4E") && has(l, "forwarded via ethernet");
-  }, 20s);
-  tb.event(back.has_value(), "traffic_returns_to_ethernet",
-           back ? *back : "traffic stayed on CAN");
+  tb.expect_line("traffic_returns_to_ethernet", "mobile", m_mobile, 20s,
+                 {"packet 0x30->0x4E", "forwarded via ethernet"},
+                 "traffic stayed on CAN");
 
   // -- 5. clean stop ----------------------------------------------------------------------------
   tb.say("stopping the sensor module cleanly (SIGTERM: a goodbye on every link)");
