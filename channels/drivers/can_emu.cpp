@@ -75,11 +75,6 @@ constexpr int64_t backoff_ns = 20'000;
 /// superposition (6), delimiter (8), intermission (3).
 constexpr uint32_t error_frame_bits = 23;
 
-std::chrono::steady_clock::time_point to_time_point(int64_t ns) {
-  // libstdc++'s steady_clock is CLOCK_MONOTONIC.
-  return std::chrono::steady_clock::time_point{std::chrono::nanoseconds{ns}};
-}
-
 // -- emulated bus: shared state ----------------------------------------------------
 
 /// What a station wants to send next. Written by its own transmit path only.
@@ -197,11 +192,7 @@ public:
     if (stopped_)
       return;
     stopped_ = true;
-    {
-      std::lock_guard<std::mutex> lk{mtx_};
-      stopping_ = true;
-    }
-    tx_cv_.notify_all();
+    gate_.close();
     station_.request_stop();
     if (tx_thread_.joinable())
       tx_thread_.join();
@@ -233,21 +224,16 @@ public:
     f.order = std::min(priority, can::max_priority);
     f.bits = can::frame_bits(cfg_.format, f.frame.len, cfg_.stuffing);
     f.enqueued_at = now_ns();
-    std::lock_guard<std::mutex> guard{mtx_};
-    if (stopping_)
-      return fail(ec::device_failed, "the device is stopped");
-    if (queue_.size() >= cfg_.queue)
-      return fail(ec::queue_full, "transmit queue full ("
-                                    + std::to_string(cfg_.queue)
-                                    + " frames)");
+    std::lock_guard<std::mutex> guard{gate_.mutex()};
+    if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
+      return err;
     f.seq = next_seq_++;
     queue_.push_back(f);
     std::push_heap(queue_.begin(), queue_.end(), later);
     // Published before send() returns: from now on, the frame takes part
     // in every arbitration on the bus.
     publish(queue_.front());
-    if (tx_idle_)
-      tx_cv_.notify_one();
+    gate_.notify();
     return caf::none;
   }
 
@@ -363,7 +349,7 @@ private:
   // -- arbitration and transmission ------------------------------------------------
 
   /// Makes `f` this station's published frame and shows a sign of life.
-  /// Called with mtx_ held.
+  /// Called with gate_.mutex() held.
   void publish(const tx_frame& f) {
     auto& me = bus().slots[cfg_.node];
     auto word = uint64_t{1} << 32 | f.key;
@@ -426,26 +412,22 @@ private:
     ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0); // precise wake-ups
     std::vector<uint8_t> buf(wire::header_size + CANFD_MTU);
     auto& busy_until = bus().busy_until;
-    std::unique_lock<std::mutex> lk{mtx_};
+    std::unique_lock<std::mutex> lk{gate_.mutex()};
     for (;;) {
-      tx_idle_ = true;
-      tx_cv_.wait(lk, [this] { return stopping_ || !queue_.empty(); });
-      tx_idle_ = false;
-      if (stopping_)
+      if (!gate_.wait_for_work(lk, [this] { return !queue_.empty(); }))
         break;
       auto& head = queue_.front();
       publish(head);
       auto now = now_ns();
       auto busy = busy_until.load();
       if (busy > now) {
-        tx_cv_.wait_until(lk, to_time_point(
-                                std::min(busy, now + heartbeat_period_ns)));
+        gate_.sleep_until(lk, std::min(busy, now + heartbeat_period_ns));
         continue;
       }
       auto arb = arbitrate(head, busy, now);
       if (!arb.wins) {
         ++arbitration_lost_;
-        tx_cv_.wait_until(lk, to_time_point(now + backoff_ns));
+        gate_.sleep_until(lk, now + backoff_ns);
         continue;
       }
       auto start = std::max(arb.point, now - emu_medium::max_credit_ns);
@@ -556,15 +538,13 @@ private:
   std::thread tx_thread_;
   std::thread rx_thread_;
 
-  // Transmit queue (a heap, see `later`) and our slot, guarded by mtx_.
-  std::mutex mtx_;
-  std::condition_variable tx_cv_;
+  // Transmit queue (a heap, see `later`) and our slot, guarded by
+  // gate_.mutex().
+  emu_medium::tx_gate gate_;
   std::vector<tx_frame> queue_;
   uint64_t next_seq_ = 0;
   uint64_t published_ = 0;
   int64_t published_ready_ = 0;
-  bool stopping_ = false;
-  bool tx_idle_ = false;
 
   // Transmit thread only.
   emu_medium::dice dice_;

@@ -239,11 +239,7 @@ public:
     if (stopped_)
       return;
     stopped_ = true;
-    {
-      std::lock_guard<std::mutex> lk{mtx_};
-      stopping_ = true;
-    }
-    tx_cv_.notify_all();
+    gate_.close();
     station_.request_stop();
     if (tx_thread_.joinable())
       tx_thread_.join();
@@ -267,13 +263,9 @@ public:
     if (station_.failed())
       return make_error(ec::device_failed, prefix_ + "the link has failed");
     auto enqueued_at = now_ns();
-    std::lock_guard<std::mutex> guard{mtx_};
-    if (stopping_)
-      return make_error(ec::device_failed, prefix_ + "the device is stopped");
-    if (queue_.size() >= cfg_.queue)
-      return make_error(ec::queue_full,
-                        prefix_ + "transmit queue full ("
-                          + std::to_string(cfg_.queue) + " frames)");
+    std::lock_guard<std::mutex> guard{gate_.mutex()};
+    if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
+      return err;
     tx_frame f;
     if (!spare_.empty()) {
       f.bytes = std::move(spare_.back());
@@ -283,8 +275,7 @@ public:
     f.dst = dst;
     f.enqueued_at = enqueued_at;
     queue_.push_back(std::move(f));
-    if (tx_idle_)
-      tx_cv_.notify_one();
+    gate_.notify();
     return caf::none;
   }
 
@@ -455,12 +446,9 @@ private:
     ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0); // precise wake-ups
     std::vector<uint8_t> buf(emu::wire_header_size + cfg_.profile.mtu);
     auto& slot = medium().busy_until[cfg_.p2p ? station_.number() : 0];
-    std::unique_lock<std::mutex> lk{mtx_};
+    std::unique_lock<std::mutex> lk{gate_.mutex()};
     for (;;) {
-      tx_idle_ = true;
-      tx_cv_.wait(lk, [this] { return stopping_ || !queue_.empty(); });
-      tx_idle_ = false;
-      if (stopping_)
+      if (!gate_.wait_for_work(lk, [this] { return !queue_.empty(); }))
         return;
       auto f = std::move(queue_.front());
       queue_.pop_front();
@@ -472,11 +460,9 @@ private:
       // Wait for the end of transmission on an absolute deadline, so errors
       // do not add up; stop() interrupts.
       lk.lock();
-      auto deadline = std::chrono::steady_clock::time_point{
-        std::chrono::nanoseconds{end}};
-      while (!stopping_ && now_ns() < end)
-        tx_cv_.wait_until(lk, deadline);
-      if (stopping_)
+      while (!gate_.closed() && now_ns() < end)
+        gate_.sleep_until(lk, end);
+      if (gate_.closed())
         return;
       lk.unlock();
       if (!station_.failed() && !transmit(f, end, buf))
@@ -598,13 +584,10 @@ private:
   std::thread tx_thread_;
   std::thread rx_thread_;
 
-  // Transmit queue, guarded by mtx_.
-  std::mutex mtx_;
-  std::condition_variable tx_cv_;
+  // Transmit queue, guarded by gate_.mutex().
+  emu_medium::tx_gate gate_;
   std::deque<tx_frame> queue_;
   std::vector<std::vector<uint8_t>> spare_;
-  bool stopping_ = false;
-  bool tx_idle_ = false;
 
   // Transmit thread only.
   emu_medium::dice dice_;

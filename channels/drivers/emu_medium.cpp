@@ -83,6 +83,17 @@ void hold_queue::recycle(std::vector<uint8_t> buf) {
     spare_.push_back(std::move(buf));
 }
 
+caf::error tx_gate::admit(size_t queued, size_t capacity,
+                          const std::string& prefix) const {
+  if (closed_)
+    return make_error(ec::device_failed, prefix + "the device is stopped");
+  if (queued >= capacity)
+    return make_error(ec::queue_full, prefix + "transmit queue full ("
+                                        + std::to_string(capacity)
+                                        + " frames)");
+  return caf::none;
+}
+
 // -- station: opening ------------------------------------------------------------
 
 medium_client::~medium_client() = default;

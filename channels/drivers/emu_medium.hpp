@@ -27,6 +27,8 @@
 // or receive thread running in it (leave: see its comment).
 
 #include <atomic>
+#include <chrono>
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <mutex>
@@ -231,6 +233,71 @@ private:
   uint64_t next_seq_ = 0;
   std::vector<held> heap_;
   std::vector<std::vector<uint8_t>> spare_;
+};
+
+// -- the transmit hand-over -----------------------------------------------------
+
+/// The hand-over between send() (any thread) and a driver's transmit thread:
+/// the mutex that guards the driver's queue (FIFO, priority heap: the
+/// driver's own), the condition the transmit thread sleeps on, and the
+/// closed flag. Members marked "lock held" need mutex() held by the caller.
+class tx_gate {
+public:
+  std::mutex& mutex() {
+    return mtx_;
+  }
+
+  /// send(), lock held: ec::device_failed once closed, ec::queue_full when
+  /// `queued` frames already wait (`capacity` at most); texts start with
+  /// `prefix`.
+  caf::error admit(size_t queued, size_t capacity,
+                   const std::string& prefix) const;
+
+  /// send(), lock held, after queueing: wakes a transmit thread waiting for
+  /// work.
+  void notify() {
+    if (idle_)
+      cv_.notify_one();
+  }
+
+  /// Transmit thread, lock held by `lk`: sleeps until `has_work()` or
+  /// close(). False when closed.
+  template <class F>
+  bool wait_for_work(std::unique_lock<std::mutex>& lk, F&& has_work) {
+    idle_ = true;
+    cv_.wait(lk, [&] { return closed_ || has_work(); });
+    idle_ = false;
+    return !closed_;
+  }
+
+  /// Transmit thread, lock held by `lk`: sleeps until `deadline_ns`
+  /// (CLOCK_MONOTONIC, libstdc++'s steady_clock), close() or a spurious
+  /// wake-up; callers re-check their condition.
+  void sleep_until(std::unique_lock<std::mutex>& lk, int64_t deadline_ns) {
+    cv_.wait_until(lk, std::chrono::steady_clock::time_point{
+                         std::chrono::nanoseconds{deadline_ns}});
+  }
+
+  /// Lock held.
+  bool closed() const {
+    return closed_;
+  }
+
+  /// Any thread, lock not held: refuses further frames and wakes the
+  /// transmit thread, which then ends.
+  void close() {
+    {
+      std::lock_guard<std::mutex> guard{mtx_};
+      closed_ = true;
+    }
+    cv_.notify_all();
+  }
+
+private:
+  std::mutex mtx_;
+  std::condition_variable cv_;
+  bool closed_ = false;
+  bool idle_ = false;
 };
 
 // -- one station on a medium ---------------------------------------------------
