@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <iterator>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -47,38 +48,17 @@ constexpr size_t min_entry_size = 4 + 1 + 1;
 constexpr uint8_t max_kind = static_cast<uint8_t>(asl_kind::ack);
 constexpr uint8_t max_query_by = static_cast<uint8_t>(query_by::any);
 
+/// Kind names for errors, by kind value (0 is no kind).
+constexpr const char* kind_names[] = {
+  "?", "query", "answer", "request", "response", "watch", "unwatch", "down",
+  "withdraw", "subscribe", "unsubscribe", "publish", "advertise",
+  "reliable request", "ack",
+};
+static_assert(std::size(kind_names) == size_t{max_kind} + 1);
+
 const char* name_of(asl_kind k) {
-  switch (k) {
-    case asl_kind::query:
-      return "query";
-    case asl_kind::answer:
-      return "answer";
-    case asl_kind::request:
-      return "request";
-    case asl_kind::response:
-      return "response";
-    case asl_kind::watch:
-      return "watch";
-    case asl_kind::unwatch:
-      return "unwatch";
-    case asl_kind::down:
-      return "down";
-    case asl_kind::withdraw:
-      return "withdraw";
-    case asl_kind::subscribe:
-      return "subscribe";
-    case asl_kind::unsubscribe:
-      return "unsubscribe";
-    case asl_kind::publish:
-      return "publish";
-    case asl_kind::advertise:
-      return "advertise";
-    case asl_kind::reliable_request:
-      return "reliable request";
-    case asl_kind::ack:
-      return "ack";
-  }
-  return "?";
+  auto i = static_cast<size_t>(k);
+  return i < std::size(kind_names) ? kind_names[i] : "?";
 }
 
 std::string num(size_t x) {
@@ -141,6 +121,35 @@ struct writer : le_writer {
     u8(e.code);
     text(e.context);
   }
+
+  // -- one field by its type ----------------------------------------------------
+
+  template <class T>
+  void field(T x) {
+    static_assert(std::is_unsigned_v<T>, "an unsigned integer");
+    le(x);
+  }
+
+  void field(bool x) {
+    u8(x ? 1 : 0);
+  }
+
+  void field(const std::string& s) {
+    str(s);
+  }
+
+  void field(const byte_buffer& b) {
+    rest(b);
+  }
+
+  void field(const wire_error& e) {
+    error(e);
+  }
+
+  template <class... Ts>
+  void fields(const Ts&... xs) {
+    (field(xs), ...);
+  }
 };
 
 void put(writer& w, const asl_query& x) {
@@ -166,14 +175,11 @@ void put(writer& w, const asl_answer& x) {
 }
 
 void put(writer& w, const asl_request& x) {
-  w.u64(x.request_id);
-  w.u32(x.apo);
-  w.rest(x.payload);
+  w.fields(x.request_id, x.apo, x.payload);
 }
 
 void put(writer& w, const asl_response& x) {
-  w.u64(x.request_id);
-  w.u8(x.ok ? 1 : 0);
+  w.fields(x.request_id, x.ok);
   if (x.ok)
     w.rest(x.payload);
   else
@@ -181,51 +187,43 @@ void put(writer& w, const asl_response& x) {
 }
 
 void put(writer& w, const asl_watch& x) {
-  w.u32(x.apo);
+  w.fields(x.apo);
 }
 
 void put(writer& w, const asl_unwatch& x) {
-  w.u32(x.apo);
+  w.fields(x.apo);
 }
 
 void put(writer& w, const asl_down& x) {
-  w.u32(x.apo);
-  w.error(x.reason);
+  w.fields(x.apo, x.reason);
 }
 
 void put(writer& w, const asl_withdraw& x) {
-  w.u32(x.apo);
-  w.str(x.name);
+  w.fields(x.apo, x.name);
 }
 
 void put(writer& w, const asl_subscribe& x) {
-  w.str(x.topic);
-  w.u32(x.lease_ms);
+  w.fields(x.topic, x.lease_ms);
 }
 
 void put(writer& w, const asl_unsubscribe& x) {
-  w.str(x.topic);
+  w.fields(x.topic);
 }
 
 void put(writer& w, const asl_publish& x) {
-  w.str(x.topic);
-  w.u32(x.seq);
-  w.rest(x.payload);
+  w.fields(x.topic, x.seq, x.payload);
 }
 
 void put(writer& w, const asl_advertise& x) {
-  w.str(x.topic);
+  w.fields(x.topic);
 }
 
 void put(writer& w, const asl_reliable_request& x) {
-  w.u64(x.request_id);
-  w.u32(x.apo);
-  w.u8(x.oneway ? 1 : 0);
-  w.rest(x.payload);
+  w.fields(x.request_id, x.apo, x.oneway, x.payload);
 }
 
 void put(writer& w, const asl_ack& x) {
-  w.u64(x.request_id);
+  w.fields(x.request_id);
 }
 
 // -- reading ---------------------------------------------------------------------
@@ -263,16 +261,20 @@ struct reader {
                 + num(left()) + " left)");
   }
 
+  // -- one field by its type ----------------------------------------------------
+
   /// An unsigned integer of sizeof(T) bytes.
   template <class T>
   caf::error field(const char* name, T& x) {
+    static_assert(std::is_unsigned_v<T>, "an unsigned integer");
     if (auto err = need(name, sizeof(T)))
       return err;
     x = in.le<T>();
     return caf::none;
   }
 
-  caf::error boolean(const char* name, bool& x) {
+  /// One byte, 0 or 1.
+  caf::error field(const char* name, bool& x) {
     uint8_t b = 0;
     if (auto err = field(name, b))
       return err;
@@ -282,7 +284,14 @@ struct reader {
     return caf::none;
   }
 
-  caf::error str(const char* name, std::string& x) {
+  /// The last field: the rest of the message.
+  caf::error field(const char*, byte_buffer& x) {
+    in.rest(x);
+    return caf::none;
+  }
+
+  /// A 1-byte length and that many bytes.
+  caf::error field(const char* name, std::string& x) {
     if (left() < 1)
       return fail(std::string{name} + " length truncated (needs 1 byte, 0 left)");
     size_t n = in.u8();
@@ -292,8 +301,17 @@ struct reader {
     return caf::none;
   }
 
-  void rest(byte_buffer& x) {
-    in.rest(x);
+  /// Named fields in wire order ("apo", x.apo, "name", x.name, ...); the
+  /// first that fails is the result.
+  caf::error fields() {
+    return caf::none;
+  }
+
+  template <class T, class... Ts>
+  caf::error fields(const char* name, T& x, Ts&... more) {
+    if (auto err = field(name, x))
+      return err;
+    return fields(more...);
   }
 
   caf::error error(const error_fields& f, wire_error& x) {
@@ -301,20 +319,18 @@ struct reader {
       return err;
     if (auto err = field(f.code, x.code))
       return err;
-    return str(f.context, x.context);
+    return field(f.context, x.context);
   }
 };
 
 caf::error get(reader& r, asl_query& x) {
-  if (auto err = r.field("query_id", x.query_id))
-    return err;
   uint8_t by = 0;
-  if (auto err = r.field("by", by))
+  if (auto err = r.fields("query_id", x.query_id, "by", by))
     return err;
   if (by > max_query_by)
     return r.fail("by " + num(by) + " unknown (0 name, 1 type, 2 any)");
   x.by = static_cast<query_by>(by);
-  if (auto err = r.str("pattern", x.pattern))
+  if (auto err = r.fields("pattern", x.pattern))
     return err;
   if (x.by == query_by::any && !x.pattern.empty())
     return r.fail("by any with a " + num(x.pattern.size())
@@ -323,10 +339,8 @@ caf::error get(reader& r, asl_query& x) {
 }
 
 caf::error get(reader& r, asl_answer& x) {
-  if (auto err = r.field("query_id", x.query_id))
-    return err;
   uint8_t count = 0;
-  if (auto err = r.field("count", count))
+  if (auto err = r.fields("query_id", x.query_id, "count", count))
     return err;
   if (count > max_answer_entries)
     return r.fail(num(count) + " entries, at most " + num(max_answer_entries));
@@ -338,11 +352,7 @@ caf::error get(reader& r, asl_answer& x) {
   for (size_t i = 0; i < count; ++i) {
     r.entry = i + 1;
     auto& e = x.entries[i];
-    if (auto err = r.field("apo", e.apo))
-      return err;
-    if (auto err = r.str("name", e.name))
-      return err;
-    if (auto err = r.str("type", e.type))
+    if (auto err = r.fields("apo", e.apo, "name", e.name, "type", e.type))
       return err;
   }
   r.entry = 0;
@@ -350,91 +360,74 @@ caf::error get(reader& r, asl_answer& x) {
 }
 
 caf::error get(reader& r, asl_request& x) {
-  if (auto err = r.field("request_id", x.request_id))
+  return r.fields("request_id", x.request_id, "apo", x.apo, "payload",
+                  x.payload);
+}
+
+/// A request_id that must not be 0, and why.
+caf::error numbered(reader& r, uint64_t& request_id, const char* why) {
+  if (auto err = r.fields("request_id", request_id))
     return err;
-  if (auto err = r.field("apo", x.apo))
-    return err;
-  r.rest(x.payload);
+  if (request_id == 0)
+    return r.fail(std::string{"request_id 0 ("} + why + ")");
   return caf::none;
 }
 
 caf::error get(reader& r, asl_response& x) {
-  if (auto err = r.field("request_id", x.request_id))
+  if (auto err = numbered(r, x.request_id,
+                          "one-way requests get no response"))
     return err;
-  if (x.request_id == 0)
-    return r.fail("request_id 0 (one-way requests get no response)");
-  if (auto err = r.boolean("ok", x.ok))
+  if (auto err = r.fields("ok", x.ok))
     return err;
-  if (x.ok) {
-    r.rest(x.payload);
-    return caf::none;
-  }
+  if (x.ok)
+    return r.fields("payload", x.payload);
   return r.error({"error.category", "error.code", "error.context"}, x.error);
 }
 
 caf::error get(reader& r, asl_watch& x) {
-  return r.field("apo", x.apo);
+  return r.fields("apo", x.apo);
 }
 
 caf::error get(reader& r, asl_unwatch& x) {
-  return r.field("apo", x.apo);
+  return r.fields("apo", x.apo);
 }
 
 caf::error get(reader& r, asl_down& x) {
-  if (auto err = r.field("apo", x.apo))
+  if (auto err = r.fields("apo", x.apo))
     return err;
   return r.error({"reason.category", "reason.code", "reason.context"},
                  x.reason);
 }
 
 caf::error get(reader& r, asl_withdraw& x) {
-  if (auto err = r.field("apo", x.apo))
-    return err;
-  return r.str("name", x.name);
+  return r.fields("apo", x.apo, "name", x.name);
 }
 
 caf::error get(reader& r, asl_subscribe& x) {
-  if (auto err = r.str("topic", x.topic))
-    return err;
-  return r.field("lease_ms", x.lease_ms);
+  return r.fields("topic", x.topic, "lease_ms", x.lease_ms);
 }
 
 caf::error get(reader& r, asl_unsubscribe& x) {
-  return r.str("topic", x.topic);
+  return r.fields("topic", x.topic);
 }
 
 caf::error get(reader& r, asl_publish& x) {
-  if (auto err = r.str("topic", x.topic))
-    return err;
-  if (auto err = r.field("seq", x.seq))
-    return err;
-  r.rest(x.payload);
-  return caf::none;
+  return r.fields("topic", x.topic, "seq", x.seq, "payload", x.payload);
 }
 
 caf::error get(reader& r, asl_advertise& x) {
-  return r.str("topic", x.topic);
+  return r.fields("topic", x.topic);
 }
 
 caf::error get(reader& r, asl_reliable_request& x) {
-  if (auto err = r.field("request_id", x.request_id))
+  if (auto err = numbered(r, x.request_id,
+                          "reliable requests are numbered"))
     return err;
-  if (x.request_id == 0)
-    return r.fail("request_id 0 (reliable requests are numbered)");
-  if (auto err = r.field("apo", x.apo))
-    return err;
-  if (auto err = r.boolean("oneway", x.oneway))
-    return err;
-  r.rest(x.payload);
-  return caf::none;
+  return r.fields("apo", x.apo, "oneway", x.oneway, "payload", x.payload);
 }
 
 caf::error get(reader& r, asl_ack& x) {
-  if (auto err = r.field("request_id", x.request_id))
-    return err;
-  if (x.request_id == 0)
-    return r.fail("request_id 0 (reliable requests are numbered)");
-  return caf::none;
+  return numbered(r, x.request_id, "reliable requests are numbered");
 }
 
 template <class T>

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cstdio>
+#include <iterator>
 #include <string>
 #include <tuple>
 #include <type_traits>
@@ -42,31 +43,23 @@ constexpr uint8_t first_byte(packet_type t) {
   return static_cast<uint8_t>(wire_version << 4 | static_cast<uint8_t>(t));
 }
 
+/// Type names for errors, by type value.
+constexpr const char* type_names[] = {
+  "data",  "hello",    "update",            "seqno_request",
+  "claim", "conflict", "challenge_request", "challenge_reply",
+};
+
 const char* name_of(packet_type t) {
-  switch (t) {
-    case packet_type::data:
-      return "data";
-    case packet_type::hello:
-      return "hello";
-    case packet_type::update:
-      return "update";
-    case packet_type::seqno_request:
-      return "seqno_request";
-    case packet_type::claim:
-      return "claim";
-    case packet_type::conflict:
-      return "conflict";
-    case packet_type::challenge_request:
-      return "challenge_request";
-    case packet_type::challenge_reply:
-      return "challenge_reply";
-  }
-  return "?";
+  auto i = static_cast<size_t>(t);
+  return i < std::size(type_names) ? type_names[i] : "?";
 }
 
 constexpr bool known_type(uint8_t t) {
-  return t <= static_cast<uint8_t>(packet_type::challenge_reply);
+  return t < std::size(type_names);
 }
+static_assert(!known_type(static_cast<uint8_t>(packet_type::challenge_reply)
+                          + 1)
+              && known_type(static_cast<uint8_t>(packet_type::challenge_reply)));
 
 std::string num(size_t x) {
   return std::to_string(x);
@@ -136,76 +129,44 @@ constexpr size_t wire_size = sizeof(T);
 template <>
 constexpr size_t wire_size<challenge_nonce> = challenge_nonce_size;
 
-/// The layout of each fixed-size packet: its type and its fields in wire
-/// order, after the first byte. One table serves encode, decode and size.
+/// The layout of each fixed-size packet: its type, then its fields in wire
+/// order after the first byte. One table serves encode, decode and size.
 template <class T>
-struct fixed;
-
+constexpr auto layout = nullptr;
 template <>
-struct fixed<hello> {
-  static constexpr auto type = packet_type::hello;
-  template <class X>
-  static auto fields(X& x) {
-    return std::tie(x.sender, x.instance, x.seqno, x.interval_ms);
-  }
-};
-
+constexpr auto layout<hello>
+  = std::make_tuple(packet_type::hello, &hello::sender, &hello::instance,
+                    &hello::seqno, &hello::interval_ms);
 template <>
-struct fixed<seqno_request> {
-  static constexpr auto type = packet_type::seqno_request;
-  template <class X>
-  static auto fields(X& x) {
-    return std::tie(x.sender, x.origin, x.seqno, x.hop_count);
-  }
-};
-
+constexpr auto layout<seqno_request>
+  = std::make_tuple(packet_type::seqno_request, &seqno_request::sender,
+                    &seqno_request::origin, &seqno_request::seqno,
+                    &seqno_request::hop_count);
 template <>
-struct fixed<claim> {
-  static constexpr auto type = packet_type::claim;
-  template <class X>
-  static auto fields(X& x) {
-    return std::tie(x.id, x.nonce, x.instance, x.hop_limit);
-  }
-};
-
+constexpr auto layout<claim>
+  = std::make_tuple(packet_type::claim, &claim::id, &claim::nonce,
+                    &claim::instance, &claim::hop_limit);
 template <>
-struct fixed<conflict> {
-  static constexpr auto type = packet_type::conflict;
-  template <class X>
-  static auto fields(X& x) {
-    return std::tie(x.id, x.holder_instance, x.claim_nonce, x.loser_instance,
-                    x.hop_limit);
-  }
-};
-
+constexpr auto layout<conflict>
+  = std::make_tuple(packet_type::conflict, &conflict::id,
+                    &conflict::holder_instance, &conflict::claim_nonce,
+                    &conflict::loser_instance, &conflict::hop_limit);
 template <>
-struct fixed<challenge_request> {
-  static constexpr auto type = packet_type::challenge_request;
-  template <class X>
-  static auto fields(X& x) {
-    return std::tie(x.nonce);
-  }
-};
-
+constexpr auto layout<challenge_request>
+  = std::make_tuple(packet_type::challenge_request, &challenge_request::nonce);
 template <>
-struct fixed<challenge_reply> {
-  static constexpr auto type = packet_type::challenge_reply;
-  template <class X>
-  static auto fields(X& x) {
-    return std::tie(x.nonce);
-  }
-};
-
-template <class... Fs>
-constexpr size_t sum_of_sizes(std::tuple<Fs&...>*) {
-  return (size_t{1} + ... + wire_size<std::remove_const_t<Fs>>);
-}
+constexpr auto layout<challenge_reply>
+  = std::make_tuple(packet_type::challenge_reply, &challenge_reply::nonce);
 
 /// Bytes of a fixed-size packet, first byte included.
 template <class T>
 constexpr size_t fixed_size() {
-  using tuple = decltype(fixed<T>::fields(std::declval<T&>()));
-  return sum_of_sizes(static_cast<tuple*>(nullptr));
+  return std::apply(
+    [](packet_type, auto... field) {
+      return (size_t{1} + ... + wire_size<std::remove_reference_t<
+                                  decltype(std::declval<T&>().*field)>>);
+    },
+    layout<T>);
 }
 
 static_assert(fixed_size<hello>() == hello_size);
@@ -218,21 +179,25 @@ static_assert(fixed_size<challenge_reply>() == challenge_size);
 template <class T>
 void encode_fixed(const T& x, byte_buffer& out) {
   le_writer w{out};
-  w.u8(first_byte(fixed<T>::type));
-  std::apply([&w](const auto&... f) { (put(w, f), ...); },
-             fixed<T>::fields(x));
+  std::apply(
+    [&](packet_type t, auto... field) {
+      w.u8(first_byte(t));
+      (put(w, x.*field), ...);
+    },
+    layout<T>);
 }
 
 template <class T>
 caf::expected<T> decode_fixed(const uint8_t* data, size_t size) {
-  constexpr auto t = fixed<T>::type;
+  constexpr auto t = std::get<0>(layout<T>);
   if (auto err = check_head(t, data, size))
     return err;
   if (auto err = check_exact(t, size, fixed_size<T>()))
     return err;
   le_reader r{data, size, 1};
   T x;
-  std::apply([&r](auto&... f) { (get(r, f), ...); }, fixed<T>::fields(x));
+  std::apply([&](packet_type, auto... field) { (get(r, x.*field), ...); },
+             layout<T>);
   return x;
 }
 
