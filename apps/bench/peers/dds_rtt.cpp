@@ -171,10 +171,7 @@ int dds_count(const endpoint_params& p) {
     return 1;
   }
   std::cout << "ready " << p.port << std::endl;
-  oneway_counter c;
-  c.warmup = p.warmup;
-  c.total = p.warmup + p.count;
-  c.ack_every = p.ack_every;
+  auto c = oneway_counter_for(p);
   constexpr int batch = 64;
   void* samples[batch];
   dds_sample_info_t infos[batch];

@@ -180,6 +180,42 @@ inline int64_t now_ns() {
     .count();
 }
 
+/// A oneway receiver's counter for a run with `p`.
+inline oneway_counter oneway_counter_for(const endpoint_params& p) {
+  oneway_counter c;
+  c.warmup = p.warmup;
+  c.total = p.warmup + p.count;
+  c.ack_every = p.ack_every;
+  return c;
+}
+
+/// A oneway receiver's handling of one received payload of `n` bytes, for
+/// transports without message types of their own (udp, zmq): under 4
+/// bytes it is ignored; the done marker is answered with the figures
+/// through `send_result(const oneway_result_msg&)`; any other payload goes
+/// to `c`, and an acknowledgement that falls due out through
+/// `send_ack(const oneway_ack_msg&)`. O(1).
+template <class SendResult, class SendAck>
+void count_payload(oneway_counter& c, const uint8_t* data, int64_t n,
+                   SendResult send_result, SendAck send_ack) {
+  if (n < 4)
+    return;
+  auto seq = payload_seq(data, static_cast<size_t>(n));
+  if (seq == oneway_done) {
+    oneway_result_msg r;
+    r.received = c.received;
+    r.elapsed_ns = c.elapsed();
+    r.allocs = c.allocs_per_message();
+    send_result(r);
+    return;
+  }
+  if (c.on_message(seq, now_ns())) {
+    oneway_ack_msg a;
+    a.acked = c.next;
+    send_ack(a);
+  }
+}
+
 /// The oneway sender's loop for blocking transports. `send_one(seq)` sends
 /// data message `seq` (returns an error text or empty);
 /// `read_acks(block, acked)` raises `acked` from the acknowledgements that

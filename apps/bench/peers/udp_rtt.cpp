@@ -53,32 +53,18 @@ using ack_datagram = oneway_ack_msg;
 /// oneway receiver: counts data datagrams, acknowledges to their sender,
 /// answers a done datagram with the figures.
 [[noreturn]] void udp_count(int fd, const endpoint_params& p) {
-  oneway_counter c;
-  c.warmup = p.warmup;
-  c.total = p.warmup + p.count;
-  c.ack_every = p.ack_every;
+  auto c = oneway_counter_for(p);
   std::vector<uint8_t> buf(65536);
   for (;;) {
     sockaddr_in from{};
     socklen_t from_len = sizeof(from);
     auto n = ::recvfrom(fd, buf.data(), buf.size(), 0,
                         reinterpret_cast<sockaddr*>(&from), &from_len);
-    if (n < 4)
-      continue;
-    auto seq = payload_seq(buf.data(), static_cast<size_t>(n));
-    if (seq == oneway_done) {
-      result_datagram r;
-      r.received = c.received;
-      r.elapsed_ns = c.elapsed();
-      r.allocs = c.allocs_per_message();
-      ::sendto(fd, &r, sizeof(r), 0, reinterpret_cast<sockaddr*>(&from), from_len);
-      continue;
-    }
-    if (c.on_message(seq, now_ns())) {
-      ack_datagram a;
-      a.acked = c.next;
-      ::sendto(fd, &a, sizeof(a), 0, reinterpret_cast<sockaddr*>(&from), from_len);
-    }
+    auto reply = [&](const auto& msg) {
+      ::sendto(fd, &msg, sizeof(msg), 0, reinterpret_cast<sockaddr*>(&from),
+               from_len);
+    };
+    count_payload(c, buf.data(), n, reply, reply);
   }
 }
 

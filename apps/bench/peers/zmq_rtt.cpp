@@ -50,31 +50,18 @@ int zmq_count(const endpoint_params& p) {
     return 1;
   }
   std::cout << "ready " << last_port(pull) << " " << last_port(push) << std::endl;
-  oneway_counter c;
-  c.warmup = p.warmup;
-  c.total = p.warmup + p.count;
-  c.ack_every = p.ack_every;
+  auto c = oneway_counter_for(p);
   std::vector<uint8_t> buf(65536);
   for (;;) {
     int n = zmq_recv(pull, buf.data(), buf.size(), 0);
-    if (n < 4)
-      continue;
-    auto seq = payload_seq(buf.data(), static_cast<size_t>(n));
-    if (seq == oneway_done) {
-      oneway_result_msg r;
-      r.received = c.received;
-      r.elapsed_ns = c.elapsed();
-      r.allocs = c.allocs_per_message();
-      zmq_send(push, &r, sizeof(r), 0);
-      continue;
-    }
-    if (c.on_message(seq, now_ns())) {
-      oneway_ack_msg a;
-      a.acked = c.next;
-      // Never blocks: before the client's PULL connected an ack is dropped
-      // (the sender's stall timer reopens its window).
-      zmq_send(push, &a, sizeof(a), ZMQ_DONTWAIT);
-    }
+    count_payload(
+      c, buf.data(), n,
+      [push](const oneway_result_msg& r) { zmq_send(push, &r, sizeof(r), 0); },
+      [push](const oneway_ack_msg& a) {
+        // Never blocks: before the client's PULL connected an ack is
+        // dropped (the sender's stall timer reopens its window).
+        zmq_send(push, &a, sizeof(a), ZMQ_DONTWAIT);
+      });
   }
 }
 
