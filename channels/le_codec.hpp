@@ -226,8 +226,13 @@ public:
     return true;
   }
 
-  /// Everything left; the reader is then at the end.
+  /// Everything left (nothing once the reader has failed); the reader is
+  /// then at the end.
   void rest(std::vector<uint8_t>& x) {
+    if (!ok_) {
+      x.clear();
+      return;
+    }
     x.assign(data_ + pos_, data_ + size_);
     pos_ = size_;
   }

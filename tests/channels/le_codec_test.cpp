@@ -162,6 +162,9 @@ TEST(le_codec, truncation_at_every_length_fails_and_stays_failed) {
     EXPECT_TRUE(p.f.empty()) << n << " bytes";
     EXPECT_EQ(r.u8(), 0) << "sticky after " << n << " bytes";
     EXPECT_EQ(r.bytes(0), nullptr) << "sticky after " << n << " bytes";
+    bytes rest{1};
+    r.rest(rest);
+    EXPECT_TRUE(rest.empty()) << "sticky after " << n << " bytes";
   }
 }
 
