@@ -18,7 +18,7 @@
 #include "actors/discovery_table.hpp"
 #include "actors/outgoing_requests.hpp"
 #include "actors/reliable_requests.hpp"
-#include "actors/served_requests.hpp"
+#include "actors/request_server.hpp"
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/type_ids.hpp"
 #include "actors/topic_table.hpp"
@@ -53,12 +53,14 @@ struct asl_state {
   std::unique_ptr<apo_registry> apos;
   binding_table bindings;
   std::unique_ptr<outgoing_requests> pending;
-  served_requests serving;
+  std::unique_ptr<request_server> server;
   std::unique_ptr<discovery_table> discoveries;
   /// Why the routing agent stopped (then nothing can be sent: requests
   /// fail at once with app_ec::unavailable).
   caf::error agent_down;
   topic_table topics;
+  /// What the cores decided to send, transmitted by flush.
+  asl_outbox out;
   /// Modules with a route now, and since when others lost theirs.
   std::set<module_id> reachable;
   std::map<module_id, time_point> unreachable_since;
@@ -83,6 +85,14 @@ void transmit(asl_impl self, module_id dst, const asl_message& msg,
   encode(msg, st.buf);
   self->send(st.agent,
              send_packet{dst, asl_protocol, prio_normal, st.buf, sign});
+}
+
+/// Transmits what the cores put in the outbox, in order.
+void flush(asl_impl self) {
+  auto items = std::move(self->state.out.items);
+  self->state.out.items.clear();
+  for (auto& x : items)
+    transmit(self, x.dst, x.msg, x.sign);
 }
 
 /// app_ec::unavailable once the routing agent stopped, else none.
@@ -385,21 +395,6 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   }
 }
 
-asl_response error_response(uint64_t rid, const caf::error& err) {
-  asl_response r;
-  r.request_id = rid;
-  r.ok = false;
-  r.error = to_wire(err);
-  return r;
-}
-
-void respond_error(asl_impl self, module_id dst, uint64_t rid,
-                   const caf::error& err, bool sign = false) {
-  if (rid == 0)
-    return;
-  transmit(self, dst, error_response(rid, err), sign);
-}
-
 void on_response(asl_impl self, module_id src, asl_response& r) {
   auto& st = self->state;
   auto waiting = st.pending->expecting(r.request_id, src, false);
@@ -470,111 +465,42 @@ void on_ack(asl_impl self, module_id src, const asl_ack& a) {
 
 // -- requests: the receiver ----------------------------------------------------------
 
-/// Whether a request for local APO `apo` that arrived from `src` (signed
-/// and verified: `authenticated`) may reach it; if not, it is counted and
-/// the requester gets app_ec::unauthorized.
-bool authorized(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
-                bool authenticated) {
-  auto& st = self->state;
-  if (!st.apos->signed_only(apo) || authenticated
-      || st.cfg.allow_unsigned_remote)
-    return true;
-  ++st.stats.rx_unauthorized;
-  auto entry = st.apos->table().local(apo);
-  respond_error(self, src, rid,
-                asl_error::unauthorized(entry ? entry->name : "?", st.self_id),
-                true);
-  return false;
-}
-
-void send_ack(asl_impl self, module_id dst, uint64_t rid) {
-  ++self->state.stats.acks_sent;
-  transmit(self, dst, asl_ack{rid});
-}
-
-/// A request (`rid` 0: a one-way message) for local APO `apo` from module
-/// `src`, plain or `reliable` (then a copy that arrived before is answered
-/// from the cache, never delivered again).
+/// A request (`rid` 0: a plain one-way message) for local APO `apo` from
+/// module `src`, plain or reliable.
 void on_request(asl_impl self, module_id src, uint64_t rid, uint32_t apo,
                 bool oneway, const byte_buffer& payload, bool authenticated,
                 bool reliable) {
   auto& st = self->state;
-  if (!authorized(self, src, rid, apo, authenticated))
-    return;
-  if (reliable)
-    if (auto c = st.reliable.duplicate(src, rid)) {
-      if (c->done && !c->oneway)
-        transmit(self, src, c->response, c->sign);
-      else
-        send_ack(self, src, rid);
-      return;
+  auto& server = *st.server;
+  if (server.admit(src, rid, apo, reliable, authenticated, st.self_id,
+                   st.out)) {
+    if (auto msg = unmarshal_counted(self, payload); !msg) {
+      server.malformed(src, rid, apo, msg.error(), st.self_id, st.out);
+    } else if (auto local = server.accept(src, rid, apo, oneway, reliable,
+                                          self->clock().now(), st.self_id,
+                                          st.out)) {
+      auto dst = caf::actor_cast<caf::strong_actor_ptr>(*st.apos->find(apo));
+      post(self, dst, *local != 0 ? st.sink : nullptr,
+           caf::make_message_id(*local), std::move(*msg));
     }
-  auto a = st.apos->find(apo);
-  if (a == nullptr) {
-    ++st.stats.rx_unknown_apo;
-    respond_error(self, src, rid,
-                  asl_error::no_such_apo(apo, st.self_id));
-    return;
   }
-  auto dst = caf::actor_cast<caf::strong_actor_ptr>(*a);
-  bool sign = st.apos->signed_only(apo);
-  auto msg = unmarshal_counted(self, payload);
-  if (!msg) {
-    respond_error(self, src, rid,
-                  make_herm_error(msg.error().code(),
-                                  "module " + to_hex(st.self_id) + ": "
-                                    + context_of(msg.error())),
-                  sign);
-    return;
-  }
-  auto now = self->clock().now();
-  if (oneway) {
-    if (reliable)
-      st.reliable.remember(src, rid, true, true, now);
-    ++st.stats.oneway_delivered;
-    post(self, dst, nullptr, caf::make_message_id(), std::move(*msg));
-    if (reliable)
-      send_ack(self, src, rid);
-    return;
-  }
-  if (st.serving.full()) {
-    // Not remembered: a later copy may find room.
-    ++st.stats.serving_refused;
-    respond_error(self, src, rid,
-                  asl_error::serving_full(st.self_id), sign);
-    return;
-  }
-  if (reliable)
-    st.reliable.remember(src, rid, false, false, now).sign = sign;
-  auto local = st.serving.add(
-    served{src, rid, now + st.cfg.request_timeout, reliable, sign});
-  ++st.stats.requests_served;
-  post(self, dst, st.sink, caf::make_message_id(local), std::move(*msg));
+  flush(self);
 }
 
 /// The local APO answered request `local` of a remote requester.
 void on_reply(asl_impl self, uint64_t local, caf::message& msg) {
   auto& st = self->state;
-  auto s = st.serving.take(local);
-  if (!s)
-    return; // timed out meanwhile
-  asl_response r;
-  if (msg.match_elements<caf::error>()) {
-    r = error_response(s->origin_id,
-                       asl_error::from_apo(msg.get_as<caf::error>(0)));
-  } else if (auto payload = marshal(self->system(), msg); !payload) {
-    r = error_response(s->origin_id,
-                       make_error(ec::invalid_parameter,
-                                  "the response cannot be marshalled: "
-                                    + context_of(payload.error())));
-  } else {
-    r.request_id = s->origin_id;
-    r.ok = true;
-    r.payload = std::move(*payload);
-  }
-  if (s->reliable)
-    st.reliable.respond(s->origin, s->origin_id, r);
-  transmit(self, s->origin, r, s->sign);
+  std::variant<byte_buffer, caf::error> answer;
+  if (msg.match_elements<caf::error>())
+    answer = asl_error::from_apo(msg.get_as<caf::error>(0));
+  else if (auto payload = marshal(self->system(), msg))
+    answer = std::move(*payload);
+  else
+    answer = make_error(ec::invalid_parameter,
+                        "the response cannot be marshalled: "
+                          + context_of(payload.error()));
+  st.server->reply(local, std::move(answer), st.out);
+  flush(self);
 }
 
 // -- watching ------------------------------------------------------------------------
@@ -618,66 +544,28 @@ void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
 
 // -- topics --------------------------------------------------------------------------
 
-void deliver_local(asl_impl self, const topic_table::topic& t,
-                   const caf::message& msg) {
-  for (auto& sub : t.local_subs) {
+void deliver(asl_impl self, const topic_table::subscribers& subs,
+             const caf::message& msg) {
+  for (auto& sub : subs) {
     post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
          caf::make_message_id(), msg);
     ++self->state.stats.publications_delivered;
   }
 }
 
-void send_publication(asl_impl self, const std::string& topic,
-                      const topic_table::topic& t, module_id dst) {
-  transmit(self, dst, asl_publish{topic, t.seq, t.last_payload});
-  ++self->state.stats.publications_sent;
-}
-
 void on_publish_local(asl_impl self, const std::string& topic,
                       caf::message& msg) {
   auto& st = self->state;
-  if (topic.empty() || topic.size() > max_asl_string) {
-    ++st.stats.tx_refused;
-    return;
-  }
   auto payload = marshal(self->system(), msg);
-  if (!payload || payload->size() > st.cfg.max_message) {
+  if (asl_error::check_label("a topic", topic) || !payload
+      || payload->size() > st.cfg.max_message) {
     ++st.stats.tx_refused;
     return;
   }
-  bool first = false;
-  auto& t = st.topics.publish(topic, msg, std::move(*payload),
-                               self->clock().now(), first);
-  // Subscribers that are already waiting answer with a subscription.
-  if (first)
-    transmit(self, broadcast_module, asl_advertise{topic});
-  ++st.stats.published;
-  deliver_local(self, t, msg);
-  for (auto& kv : t.remote_subs)
-    send_publication(self, topic, t, kv.first);
-}
-
-void announce_subscription(asl_impl self, const std::string& topic,
-                           topic_table::topic& t, module_id dst) {
-  auto& cfg = self->state.cfg;
-  transmit(self, dst,
-           asl_subscribe{topic, static_cast<uint32_t>(
-                                  cfg.subscription_lease.count())});
-  t.next_refresh = self->clock().now() + cfg.subscription_lease / 3;
-}
-
-void drop_subscriber(asl_impl self, const caf::actor_addr& who,
-                     const std::string* only) {
-  for (auto& topic : self->state.topics.unsubscribe(who, only))
-    transmit(self, broadcast_module, asl_unsubscribe{topic});
-}
-
-void on_remote_publication(asl_impl self, module_id src, asl_publish& p) {
-  auto& st = self->state;
-  ++st.stats.publications_received;
-  if (auto t = st.topics.received(p.topic, src, p.seq))
-    if (auto msg = unmarshal_counted(self, p.payload))
-      deliver_local(self, *t, *msg);
+  auto& subs = st.topics.publish(topic, msg, std::move(*payload),
+                                 self->clock().now(), st.out);
+  flush(self);
+  deliver(self, subs, msg);
 }
 
 // -- the network ---------------------------------------------------------------------
@@ -718,19 +606,19 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
       } else if constexpr (std::is_same_v<T, asl_withdraw>) {
         on_down_remote(self, src, x.apo, asl_error::apo_gone("withdrawn"));
       } else if constexpr (std::is_same_v<T, asl_subscribe>) {
-        auto lease = std::chrono::milliseconds(x.lease_ms);
-        if (auto t = st.topics.subscribed(x.topic, src, lease, now))
-          send_publication(self, x.topic, *t, src); // a late joiner
+        st.topics.on_subscribe(src, x, now, st.out);
       } else if constexpr (std::is_same_v<T, asl_unsubscribe>) {
-        st.topics.unsubscribed(x.topic, src);
-      } else if constexpr (std::is_same_v<T, asl_publish>) {
-        on_remote_publication(self, src, x);
+        st.topics.on_unsubscribe(src, x);
       } else if constexpr (std::is_same_v<T, asl_advertise>) {
-        if (auto t = st.topics.find(x.topic); t && !t->local_subs.empty())
-          announce_subscription(self, x.topic, *t, src);
+        st.topics.on_advertise(src, x, now, st.out);
+      } else if constexpr (std::is_same_v<T, asl_publish>) {
+        if (auto subs = st.topics.on_publish(src, x))
+          if (auto value = unmarshal_counted(self, x.payload))
+            deliver(self, *subs, *value);
       }
     },
     *msg);
+  flush(self);
 }
 
 // -- housekeeping ----------------------------------------------------------------------
@@ -812,7 +700,7 @@ void tick(asl_impl self) {
     ++st.stats.request_timeouts;
     fail(self, out, timeout_error(self, out));
   }
-  st.serving.expire(now);
+  st.server->expire(now);
   // Reliable mode: copies due, expired cache entries.
   send_due(self);
   st.reliable.expire(now);
@@ -823,9 +711,8 @@ void tick(asl_impl self) {
   for (auto id : due.search)
     rebind_search(self, id);
   // Topics: renew subscriptions, expire subscribers.
-  for (auto& topic : st.topics.housekeep(now))
-    announce_subscription(self, topic, *st.topics.find(topic),
-                          broadcast_module);
+  st.topics.housekeep(now, st.out);
+  flush(self);
   st.apos->table().expire(now, st.cfg.remote_entry_ttl);
   self->delayed_send(self, st.cfg.tick, atom::tick_v);
 }
@@ -926,15 +813,18 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
   std::random_device rd;
   auto random_key = [&rd] { return (uint64_t{rd()} << 32) | rd(); };
   init.apos = std::make_unique<apo_registry>(random_key());
-  init.serving = served_requests{cfg.max_pending};
   init.discoveries
     = std::make_unique<discovery_table>(random_key(), cfg.max_remote_apos);
   init.pending
     = std::make_unique<outgoing_requests>(random_key(), cfg.max_pending);
-  init.topics = topic_table{cfg.max_topic_peers};
+  init.topics = topic_table{cfg.max_topic_peers, cfg.subscription_lease};
   init.reliable = reliable_requests{reliable_requests::config{
     cfg.tick, cfg.retransmit_initial, cfg.retransmit_min, cfg.retransmit_max,
     cfg.max_transmissions, cfg.reliable_cache, cfg.reliable_cache_ttl}};
+  init.server = std::make_unique<request_server>(
+    request_server::config{cfg.max_pending, cfg.request_timeout,
+                           cfg.allow_unsigned_remote},
+    *init.apos, init.reliable);
   init.sink = detail::make_reply_sink(self->system(),
                                       caf::actor_cast<caf::actor>(self));
   self->send(agent, atom::subscribe_v, asl_protocol,
@@ -952,7 +842,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
     }
     if (auto apo = st.apos->number_of(msg.source))
       withdraw(self, apo, msg.reason);
-    drop_subscriber(self, msg.source, nullptr);
+    st.topics.unsubscribe(msg.source, nullptr, st.out);
+    flush(self);
   });
   self->send(self, atom::tick_v);
   return {
@@ -1012,19 +903,19 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
         return err;
       if (!sub)
         return make_error(ec::invalid_parameter, "invalid actor handle");
-      auto t = st.topics.subscribe(topic, sub);
+      auto t = st.topics.subscribe(topic, sub, self->clock().now(), st.out);
       if (t == nullptr)
         return caf::unit;
       self->monitor(sub);
-      if (t->local_subs.size() == 1)
-        announce_subscription(self, topic, *t, broadcast_module);
+      flush(self);
       if (t->has_last)
         post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
              caf::make_message_id(), t->last);
       return caf::unit;
     },
     [self](atom::unsubscribe, std::string& topic, caf::actor& sub) {
-      drop_subscriber(self, sub.address(), &topic);
+      self->state.topics.unsubscribe(sub.address(), &topic, self->state.out);
+      flush(self);
     },
     [self](atom::get, atom::stats) -> app_support_stats {
       auto& st = self->state;
@@ -1042,7 +933,17 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       result.reliable_waited = rs.reliable_waited;
       result.duplicates_suppressed = rs.duplicates_suppressed;
       result.late_duplicates = rs.late_duplicates;
+      auto& ss = st.server->stats();
+      result.requests_served = ss.requests_served;
+      result.oneway_delivered = ss.oneway_delivered;
+      result.acks_sent = ss.acks_sent;
+      result.rx_unauthorized = ss.rx_unauthorized;
+      result.rx_unknown_apo = ss.rx_unknown_apo;
+      result.serving_refused = ss.serving_refused;
       auto& ts = st.topics.stats();
+      result.published = ts.published;
+      result.publications_sent = ts.publications_sent;
+      result.publications_received = ts.publications_received;
       result.publications_lost = ts.publications_lost;
       result.subscribers_refused = ts.subscribers_refused;
       result.publishers_refused = ts.publishers_refused;

@@ -14,66 +14,66 @@ void expire_leases(Map& subs, topic_table::time_point now) {
 
 } // namespace
 
-topic_table::topic_table(size_t max_peers) : max_peers_(max_peers) {
+topic_table::topic_table(size_t max_peers, std::chrono::milliseconds lease)
+  : max_peers_(max_peers), lease_(lease) {
   // nop
 }
 
-topic_table::topic* topic_table::find(const std::string& name) {
+const topic_table::topic* topic_table::find(const std::string& name) const {
   auto i = topics_.find(name);
   return i != topics_.end() ? &i->second : nullptr;
 }
 
-// -- publisher side -----------------------------------------------------------
+void topic_table::announce(const std::string& name, topic& t, module_id dst,
+                           time_point now, asl_outbox& out) {
+  out.push(dst, asl_subscribe{name, static_cast<uint32_t>(lease_.count())});
+  t.next_refresh = now + lease_ / 3;
+}
 
-topic_table::topic& topic_table::publish(const std::string& name,
-                                         caf::message msg, byte_buffer payload,
-                                         time_point now, bool& first) {
+void topic_table::send_last(const std::string& name, const topic& t,
+                            module_id dst, asl_outbox& out) {
+  out.push(dst, asl_publish{name, t.seq, t.last_payload});
+  ++stats_.publications_sent;
+}
+
+// -- this module's publishers and subscribers ---------------------------------
+
+const topic_table::subscribers&
+topic_table::publish(const std::string& name, caf::message msg,
+                     byte_buffer payload, time_point now, asl_outbox& out) {
   auto& t = topics_[name];
-  first = !t.publishing;
-  t.publishing = true;
+  if (!t.publishing) {
+    t.publishing = true;
+    // Subscribers that are already waiting answer with a subscription.
+    out.push(broadcast_module, asl_advertise{name});
+  }
+  ++stats_.published;
   ++t.seq;
   t.has_last = true;
   t.last = std::move(msg);
   t.last_payload = std::move(payload);
   expire_leases(t.remote_subs, now);
-  return t;
+  for (auto& kv : t.remote_subs)
+    send_last(name, t, kv.first, out);
+  return t.local_subs;
 }
 
-const topic_table::topic*
-topic_table::subscribed(const std::string& name, module_id src,
-                        std::chrono::milliseconds lease, time_point now) {
-  auto t = find(name);
-  if (t == nullptr || !t->publishing)
-    return nullptr;
-  bool fresh = t->remote_subs.count(src) == 0;
-  if (fresh && t->remote_subs.size() >= max_peers_) {
-    ++stats_.subscribers_refused;
-    return nullptr;
-  }
-  t->remote_subs[src] = now + std::min(lease, max_lease);
-  return fresh && t->has_last ? t : nullptr;
-}
-
-void topic_table::unsubscribed(const std::string& name, module_id src) {
-  if (auto t = find(name))
-    t->remote_subs.erase(src);
-}
-
-// -- subscriber side ----------------------------------------------------------
-
-topic_table::topic* topic_table::subscribe(const std::string& name,
-                                           const caf::actor& sub) {
+const topic_table::topic* topic_table::subscribe(const std::string& name,
+                                                 const caf::actor& sub,
+                                                 time_point now,
+                                                 asl_outbox& out) {
   auto& t = topics_[name];
   if (std::find(t.local_subs.begin(), t.local_subs.end(), sub)
       != t.local_subs.end())
     return nullptr;
   t.local_subs.push_back(sub);
+  if (t.local_subs.size() == 1)
+    announce(name, t, broadcast_module, now, out);
   return &t;
 }
 
-std::vector<std::string> topic_table::unsubscribe(const caf::actor_addr& who,
-                                                  const std::string* only) {
-  std::vector<std::string> result;
+void topic_table::unsubscribe(const caf::actor_addr& who,
+                              const std::string* only, asl_outbox& out) {
   for (auto i = topics_.begin(); i != topics_.end();) {
     auto& t = i->second;
     if (only == nullptr || i->first == *only) {
@@ -85,7 +85,7 @@ std::vector<std::string> topic_table::unsubscribe(const caf::actor_addr& who,
                                         }),
                          t.local_subs.end());
       if (before > 0 && t.local_subs.empty()) {
-        result.push_back(i->first);
+        out.push(broadcast_module, asl_unsubscribe{i->first});
         t.last_seq.clear();
       }
     }
@@ -94,31 +94,61 @@ std::vector<std::string> topic_table::unsubscribe(const caf::actor_addr& who,
     else
       ++i;
   }
-  return result;
 }
 
-const topic_table::topic*
-topic_table::received(const std::string& name, module_id src, uint32_t seq) {
-  auto t = find(name);
-  if (t == nullptr || t->local_subs.empty())
+// -- other modules ------------------------------------------------------------
+
+void topic_table::on_subscribe(module_id src, const asl_subscribe& s,
+                               time_point now, asl_outbox& out) {
+  auto i = topics_.find(s.topic);
+  if (i == topics_.end() || !i->second.publishing)
+    return;
+  auto& t = i->second;
+  bool fresh = t.remote_subs.count(src) == 0;
+  if (fresh && t.remote_subs.size() >= max_peers_) {
+    ++stats_.subscribers_refused;
+    return;
+  }
+  t.remote_subs[src] = now + std::min(std::chrono::milliseconds(s.lease_ms),
+                                      max_lease);
+  if (fresh && t.has_last)
+    send_last(s.topic, t, src, out); // a late joiner
+}
+
+void topic_table::on_unsubscribe(module_id src, const asl_unsubscribe& u) {
+  if (auto i = topics_.find(u.topic); i != topics_.end())
+    i->second.remote_subs.erase(src);
+}
+
+void topic_table::on_advertise(module_id src, const asl_advertise& a,
+                               time_point now, asl_outbox& out) {
+  if (auto i = topics_.find(a.topic);
+      i != topics_.end() && !i->second.local_subs.empty())
+    announce(a.topic, i->second, src, now, out);
+}
+
+const topic_table::subscribers* topic_table::on_publish(module_id src,
+                                                        const asl_publish& p) {
+  ++stats_.publications_received;
+  auto i = topics_.find(p.topic);
+  if (i == topics_.end() || i->second.local_subs.empty())
     return nullptr; // no longer interested; the lease runs out
-  auto last = t->last_seq.find(src);
-  if (last != t->last_seq.end()) {
-    if (seq == last->second)
+  auto& t = i->second;
+  auto last = t.last_seq.find(src);
+  if (last != t.last_seq.end()) {
+    if (p.seq == last->second)
       return nullptr; // the same value again (a late joiner's copy)
-    if (seq > last->second + 1)
-      stats_.publications_lost += seq - last->second - 1;
-    last->second = seq;
-  } else if (t->last_seq.size() < max_peers_) {
-    t->last_seq.emplace(src, seq);
+    if (p.seq > last->second + 1)
+      stats_.publications_lost += p.seq - last->second - 1;
+    last->second = p.seq;
+  } else if (t.last_seq.size() < max_peers_) {
+    t.last_seq.emplace(src, p.seq);
   } else {
     // Delivered, but its gaps and repeats go unnoticed.
     ++stats_.publishers_refused;
   }
-  return t;
+  return &t.local_subs;
 }
-
-// -- both ---------------------------------------------------------------------
 
 void topic_table::module_lost(module_id m) {
   for (auto& kv : topics_) {
@@ -127,14 +157,12 @@ void topic_table::module_lost(module_id m) {
   }
 }
 
-std::vector<std::string> topic_table::housekeep(time_point now) {
-  std::vector<std::string> due;
+void topic_table::housekeep(time_point now, asl_outbox& out) {
   for (auto& [name, t] : topics_) {
     if (!t.local_subs.empty() && t.next_refresh <= now)
-      due.push_back(name);
+      announce(name, t, broadcast_module, now, out);
     expire_leases(t.remote_subs, now);
   }
-  return due;
 }
 
 } // namespace herm

@@ -7,13 +7,14 @@
 // on the publisher side, the sequence number, the last value (given to late
 // joiners) and the subscribed modules with the end of their lease.
 //
-// No clock and no I/O: time comes in as arguments, and the caller sends and
-// delivers what the class says to. Actor handles and messages are held as
+// No clock and no I/O: time comes in as arguments, what is to be sent goes
+// into the caller's asl_outbox, and local deliveries are returned as the
+// subscribers to give a value to. Actor handles and messages are held as
 // plain values, never used. Not thread-safe (one actor owns it). Remote
 // peers per topic are bounded by `max_peers` on either side (refusals
 // counted); local subscribers are as many as local actors subscribe. A
 // topic is dropped once it has no local subscriber and was never published
-// here. Calls are O(log t + p) for t topics and p peers of the topic, those
+// here. Calls are O(log t + p) for t topics and p peers of the topic; those
 // over all topics O(t p).
 
 #include <chrono>
@@ -26,6 +27,7 @@
 #include "caf/actor_addr.hpp"
 #include "caf/message.hpp"
 
+#include "actors/asl_outbox.hpp"
 #include "actors/asl_wire.hpp"
 #include "routing/module_id.hpp"
 
@@ -34,13 +36,14 @@ namespace herm {
 class topic_table {
 public:
   using time_point = std::chrono::steady_clock::time_point;
+  using subscribers = std::vector<caf::actor>;
 
   /// The longest lease a subscriber can ask for; longer ones are cut.
   static constexpr std::chrono::milliseconds max_lease{24 * 3600 * 1000};
 
   struct topic {
     // -- subscriber side --
-    std::vector<caf::actor> local_subs;
+    subscribers local_subs;
     time_point next_refresh;
     /// Last sequence number per publishing module.
     std::map<module_id, uint32_t> last_seq;
@@ -56,62 +59,71 @@ public:
 
   /// What the class counted (app_support_stats names them the same).
   struct counters {
+    uint64_t published = 0;
+    uint64_t publications_sent = 0;
+    uint64_t publications_received = 0;
     uint64_t publications_lost = 0;
     uint64_t subscribers_refused = 0;
     uint64_t publishers_refused = 0;
   };
 
-  explicit topic_table(size_t max_peers = SIZE_MAX);
+  /// `lease`: how long this module's subscriptions last (renewed at a
+  /// third of it).
+  explicit topic_table(size_t max_peers = SIZE_MAX,
+                       std::chrono::milliseconds lease
+                       = std::chrono::milliseconds{3000});
 
   /// The topic, or nullptr.
-  topic* find(const std::string& name);
+  const topic* find(const std::string& name) const;
 
-  // -- publisher side ---------------------------------------------------------
+  // -- this module's publishers and subscribers -------------------------------
 
-  /// A local publication of `msg` (marshalled: `payload`) at `now`: the next
-  /// sequence number, kept as the last value. Expired subscribers are
-  /// dropped; the topic's remote_subs are those to send it to. `first`
-  /// says this module did not publish it before (advertise it).
-  topic& publish(const std::string& name, caf::message msg,
-                 byte_buffer payload, time_point now, bool& first);
+  /// Publishes `msg` (marshalled: `payload`) at `now`: the next sequence
+  /// number, kept as the last value; an advertisement when this module did
+  /// not publish the topic before, and a publication to every subscribed
+  /// module whose lease holds (the others are dropped). Returns the local
+  /// subscribers to give `msg` to.
+  const subscribers& publish(const std::string& name, caf::message msg,
+                             byte_buffer payload, time_point now,
+                             asl_outbox& out);
 
-  /// Module `src` subscribes for `lease` (at most max_lease) at `now`.
-  /// Ignored unless this module publishes the topic; a new subscriber is
-  /// refused (counted) when max_peers hold leases. Returns the topic when
-  /// the new subscriber is to get the last value now, else nullptr.
-  const topic* subscribed(const std::string& name, module_id src,
-                          std::chrono::milliseconds lease, time_point now);
-
-  void unsubscribed(const std::string& name, module_id src);
-
-  // -- subscriber side --------------------------------------------------------
-
-  /// Adds local subscriber `sub`: the topic, or nullptr if `sub` subscribed
-  /// already. Its local_subs has one entry when the subscription is to be
-  /// announced.
-  topic* subscribe(const std::string& name, const caf::actor& sub);
+  /// Adds local subscriber `sub` at `now`: nullptr if it subscribed
+  /// already, else the topic (give `sub` its last value if it has one).
+  /// The first local subscriber's subscription is broadcast.
+  const topic* subscribe(const std::string& name, const caf::actor& sub,
+                         time_point now, asl_outbox& out);
 
   /// Removes local subscriber `who` from topic `*only`, or from every topic
-  /// when `only` is nullptr. Returns the topics it was the last local
-  /// subscriber of (to be unsubscribed from on the network).
-  std::vector<std::string> unsubscribe(const caf::actor_addr& who,
-                                       const std::string* only);
+  /// when `only` is nullptr. A topic that loses its last local subscriber
+  /// is unsubscribed from on the network.
+  void unsubscribe(const caf::actor_addr& who, const std::string* only,
+                   asl_outbox& out);
 
-  /// Publication `seq` from module `src` arrived: the topic whose local
-  /// subscribers get it, or nullptr (no local subscriber, or the same
-  /// value again). Gaps count as lost publications; past max_peers
-  /// publishing modules, a new one's value is delivered untracked (counted).
-  const topic* received(const std::string& name, module_id src, uint32_t seq);
+  // -- other modules ----------------------------------------------------------
 
-  // -- both -------------------------------------------------------------------
+  /// Module `src` subscribes at `now`. Ignored unless this module publishes
+  /// the topic; a new subscriber is refused (counted) when max_peers hold
+  /// leases, or else gets the last value at once (a late joiner).
+  void on_subscribe(module_id src, const asl_subscribe& s, time_point now,
+                    asl_outbox& out);
+
+  void on_unsubscribe(module_id src, const asl_unsubscribe& u);
+
+  /// Module `src` publishes a topic: subscribed here, it hears so at once.
+  void on_advertise(module_id src, const asl_advertise& a, time_point now,
+                    asl_outbox& out);
+
+  /// A publication from module `src`: the local subscribers to give it to
+  /// (once unmarshalled), or nullptr (none, or the same value again). Gaps
+  /// count as lost publications; past max_peers publishing modules, a new
+  /// one's value is delivered untracked (counted).
+  const subscribers* on_publish(module_id src, const asl_publish& p);
 
   /// Module `m` is gone: forget its leases and sequence numbers.
   void module_lost(module_id m);
 
-  /// Drops leases ended before `now`; returns the topics whose
-  /// subscription is due for renewal (the caller announces it and sets
-  /// next_refresh).
-  std::vector<std::string> housekeep(time_point now);
+  /// Drops leases ended before `now` and renews the subscriptions due.
+  void housekeep(time_point now, asl_outbox& out);
 
   const counters& stats() const {
     return stats_;
@@ -122,7 +134,14 @@ public:
   }
 
 private:
+  void announce(const std::string& name, topic& t, module_id dst,
+                time_point now, asl_outbox& out);
+
+  void send_last(const std::string& name, const topic& t, module_id dst,
+                 asl_outbox& out);
+
   size_t max_peers_;
+  std::chrono::milliseconds lease_;
   counters stats_;
   std::map<std::string, topic> topics_;
 };
