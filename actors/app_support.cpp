@@ -17,6 +17,7 @@
 #include "actors/binding_table.hpp"
 #include "actors/discovery_table.hpp"
 #include "actors/outgoing_requests.hpp"
+#include "actors/reach_table.hpp"
 #include "actors/reliable_requests.hpp"
 #include "actors/request_server.hpp"
 #include "actors/runtime/error.hpp"
@@ -61,9 +62,7 @@ struct asl_state {
   topic_table topics;
   /// What the cores decided to send, transmitted by flush.
   asl_outbox out;
-  /// Modules with a route now, and since when others lost theirs.
-  std::set<module_id> reachable;
-  std::map<module_id, time_point> unreachable_since;
+  reach_table reach;
   caf::strong_actor_ptr sink;
   /// Reliable mode: round trips, copy schedules, the duplicate cache.
   reliable_requests reliable;
@@ -76,10 +75,8 @@ using asl_impl = app_support_actor::stateful_pointer<asl_state>;
 
 // -- small helpers -----------------------------------------------------------------
 
-/// Sends an ASL message over the network; with `sign`, signed in a keyed
-/// network whatever its `auth.data` (apo_access::signed_only traffic).
-void transmit(asl_impl self, module_id dst, const asl_message& msg,
-              bool sign = false) {
+void send_now(asl_impl self, module_id dst, const asl_message& msg,
+              bool sign) {
   auto& st = self->state;
   st.buf.clear();
   encode(msg, st.buf);
@@ -92,7 +89,16 @@ void flush(asl_impl self) {
   auto items = std::move(self->state.out.items);
   self->state.out.items.clear();
   for (auto& x : items)
-    transmit(self, x.dst, x.msg, x.sign);
+    send_now(self, x.dst, x.msg, x.sign);
+}
+
+/// Sends an ASL message over the network (after what the outbox holds);
+/// with `sign`, signed in a keyed network whatever its `auth.data`
+/// (apo_access::signed_only traffic).
+void transmit(asl_impl self, module_id dst, const asl_message& msg,
+              bool sign = false) {
+  flush(self);
+  send_now(self, dst, msg, sign);
 }
 
 /// app_ec::unavailable once the routing agent stopped, else none.
@@ -125,7 +131,7 @@ void refuse(asl_impl self, const caf::strong_actor_ptr& sender,
 }
 
 bool reachable(asl_impl self, module_id m) {
-  return m == self->state.self_id || self->state.reachable.count(m) != 0;
+  return m == self->state.self_id || self->state.reach.reachable(m);
 }
 
 /// `payload` unmarshalled, or the error after counting it.
@@ -170,17 +176,11 @@ void lose_target(asl_impl self, uint32_t id, const caf::error& reason,
       ++st.stats.proxies_ended;
 }
 
-/// (Re)news binding `b`'s watch of its remote target.
-void watch(asl_impl self, binding& b) {
-  if (b.watch(self->state.self_id, self->clock().now()))
-    transmit(self, b.target.module, asl_watch{b.target.apo});
-}
-
 /// Points binding `b` at `ref`.
 void bind_to(asl_impl self, binding& b, const apo_ref& ref) {
-  b.bound = true;
-  b.target = ref;
-  watch(self, b);
+  binding_table::bind(b, ref, self->state.self_id, self->clock().now(),
+                      self->state.out);
+  flush(self);
 }
 
 /// A new proxy bound to `ref` (or, unbound, looking for `req`).
@@ -212,49 +212,28 @@ void finish_discovery(asl_impl self, uint32_t qid) {
     d->finish(std::move(d->found));
 }
 
+/// Why a discovery of `pattern` cannot start (the routing agent stopped,
+/// a bad pattern); none if it can.
+caf::error cannot_discover(asl_impl self, query_by by,
+                           const std::string& pattern) {
+  if (auto err = agent_gone(self))
+    return err;
+  if (by != query_by::any)
+    return asl_error::check_label("a pattern", pattern);
+  return caf::none;
+}
+
 void discover(asl_impl self, apo_query q, discovery_table::callback finish) {
   auto& st = self->state;
-  std::vector<apo_ref> local;
-  for (auto& e : st.apos->table().match(q.by, q.pattern))
-    local.push_back(apo_ref{st.self_id, e.apo, e.name, e.type});
-  auto qid = st.discoveries->start(q, std::move(local), std::move(finish));
+  auto timeout = std::chrono::milliseconds(q.timeout_ms);
+  auto qid = st.discoveries->start(std::move(q), st.self_id,
+                                   std::move(finish), st.out);
   if (st.discoveries->satisfied(qid)) {
     finish_discovery(self, qid);
     return;
   }
-  transmit(self, broadcast_module, asl_query{qid, q.by, q.pattern});
-  ++st.stats.queries_sent;
-  self->delayed_send(self, std::chrono::milliseconds(q.timeout_ms),
-                     atom::done_v, qid);
-}
-
-void on_answer(asl_impl self, module_id src, asl_answer& a) {
-  auto& st = self->state;
-  ++st.stats.answers_received;
-  auto now = self->clock().now();
-  for (auto& e : a.entries)
-    if (!st.apos->table().learn(src, e, now, st.cfg.max_remote_apos))
-      ++st.stats.remote_apos_refused;
-  if (st.discoveries->answered(a.query_id, src, a.entries))
-    finish_discovery(self, a.query_id);
-}
-
-void on_query(asl_impl self, module_id src, const asl_query& q) {
-  auto& st = self->state;
-  auto matches = st.apos->table().match(q.by, q.pattern);
-  if (matches.empty())
-    return;
-  ++st.stats.queries_answered;
-  asl_answer a{q.query_id, {}};
-  for (auto& e : matches) {
-    a.entries.push_back(std::move(e));
-    if (a.entries.size() == max_answer_entries) {
-      transmit(self, src, a);
-      a.entries.clear();
-    }
-  }
-  if (!a.entries.empty())
-    transmit(self, src, a);
+  flush(self);
+  self->delayed_send(self, timeout, atom::done_v, qid);
 }
 
 // -- requests: the sender ------------------------------------------------------------
@@ -290,28 +269,16 @@ bool send_reliable(asl_impl self, uint64_t rid, outgoing& out, time_point now) {
   return false;
 }
 
-/// Sends every reliable request whose time has come (all of them towards
-/// `only`, when given: it just became reachable or was bound).
-void send_due(asl_impl self, uint32_t only_binding = 0,
-              module_id only_module = no_module) {
+/// Sends every reliable request whose time has come, and those of the
+/// bindings in `forced` (a binding just bound, or bound to a module that
+/// just became reachable: then only those not acked).
+void send_due(asl_impl self, const std::vector<uint32_t>& forced = {},
+              bool unacked_only = false) {
   auto& st = self->state;
   auto now = self->clock().now();
-  auto& pending = st.pending->all();
-  for (auto i = pending.begin(); i != pending.end();) {
-    auto& out = i->second;
-    bool forced = false;
-    if (out.reliable && (only_binding != 0 || only_module != no_module)) {
-      auto b = st.bindings.find(out.binding);
-      forced = (only_binding != 0 && out.binding == only_binding)
-               || (only_module != no_module && b != nullptr && b->bound
-                   && b->target.module == only_module && !out.tx.acked);
-    }
-    if (out.reliable && (forced || out.tx.next_send <= now)
-        && send_reliable(self, i->first, out, now))
-      i = pending.erase(i);
-    else
-      ++i;
-  }
+  for (auto rid : st.pending->due(now, forced, unacked_only))
+    if (send_reliable(self, rid, *st.pending->find(rid), now))
+      st.pending->erase(rid);
 }
 
 /// Sends `msg` through binding `id` to its remote target (or, reliable,
@@ -395,14 +362,21 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   }
 }
 
+/// The request an answer (a response, or with `ack` an ack) from `src` is
+/// for; nullptr, counted as a late duplicate or unexpected, if none waits.
+outgoing* waiting_for(asl_impl self, uint64_t rid, module_id src, bool ack) {
+  auto& st = self->state;
+  auto out = st.pending->expecting(rid, src, ack);
+  if (out == nullptr && !st.reliable.late(rid))
+    ++st.stats.rx_unexpected_response;
+  return out;
+}
+
 void on_response(asl_impl self, module_id src, asl_response& r) {
   auto& st = self->state;
-  auto waiting = st.pending->expecting(r.request_id, src, false);
-  if (waiting == nullptr) {
-    if (!st.reliable.late(r.request_id))
-      ++st.stats.rx_unexpected_response;
+  auto waiting = waiting_for(self, r.request_id, src, false);
+  if (waiting == nullptr)
     return;
-  }
   if (waiting->reliable) {
     auto& out = *waiting;
     st.reliable.answered(out.tx, self->clock().now());
@@ -446,12 +420,9 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
 
 void on_ack(asl_impl self, module_id src, const asl_ack& a) {
   auto& st = self->state;
-  auto out = st.pending->expecting(a.request_id, src, true);
-  if (out == nullptr) {
-    if (!st.reliable.late(a.request_id))
-      ++st.stats.rx_unexpected_response;
+  auto out = waiting_for(self, a.request_id, src, true);
+  if (out == nullptr)
     return;
-  }
   ++st.stats.acks_received;
   if (out->oneway) {
     st.reliable.answered(out->tx, self->clock().now());
@@ -583,9 +554,10 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
     [&](auto& x) {
       using T = std::decay_t<decltype(x)>;
       if constexpr (std::is_same_v<T, asl_query>) {
-        on_query(self, src, x);
+        st.discoveries->on_query(src, x, st.out);
       } else if constexpr (std::is_same_v<T, asl_answer>) {
-        on_answer(self, src, x);
+        if (st.discoveries->on_answer(src, x, now))
+          finish_discovery(self, x.query_id);
       } else if constexpr (std::is_same_v<T, asl_request>) {
         on_request(self, src, x.request_id, x.apo, x.request_id == 0,
                    x.payload, pkt.authenticated, false);
@@ -626,8 +598,7 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
 /// Module `m` stayed unreachable past the grace period.
 void module_lost(asl_impl self, module_id m) {
   auto& st = self->state;
-  auto err = make_error(routing_ec::no_route,
-                        "module " + to_hex(m) + " unreachable");
+  auto err = asl_error::unreachable(m);
   // Reliable bindings ride it out: their requests wait for the module or
   // their deadline.
   for (auto id : st.bindings.bound_to(m, 0))
@@ -639,77 +610,52 @@ void module_lost(asl_impl self, module_id m) {
   st.topics.module_lost(m);
 }
 
-void rebind_search(asl_impl self, uint32_t id) {
-  auto& st = self->state;
-  auto& b = *st.bindings.find(id);
-  b.searching = true;
-  apo_query q{b.by, b.pattern,
-              static_cast<uint32_t>(st.cfg.rebind_interval.count() / 2), true};
-  discover(self, q, [self, id](std::vector<apo_ref> found) {
-    auto& state = self->state;
-    auto x = state.bindings.find(id);
-    if (x == nullptr)
-      return;
-    x->searching = false;
-    x->next_search = self->clock().now() + state.cfg.rebind_interval;
-    if (!found.empty() && !x->bound) {
-      bind_to(self, *x, found.front());
-      if (x->reliable)
-        send_due(self, id);
-    }
-  });
-}
-
-/// The error for a request whose deadline passed.
-caf::error timeout_error(asl_impl self, const outgoing& out) {
-  auto& st = self->state;
-  auto within = " within " + std::to_string(st.cfg.request_timeout.count())
-                + " ms";
-  if (out.reliable) {
-    auto b = st.bindings.find(out.binding);
-    if (b == nullptr || !b->bound)
-      return asl_error::apo_gone("no APO to send it to" + within);
-    if (!reachable(self, b->target.module))
-      return make_error(routing_ec::no_route,
-                        "module " + to_hex(b->target.module)
-                          + " stayed unreachable" + within);
-  }
-  return make_error(ec::timeout,
-                    "no response from module " + to_hex(out.tx.dst) + within);
+/// Asks the routing agent for this module's id (kept if it does not
+/// answer), then calls `then`.
+template <class F>
+void refresh_self_id(asl_impl self, F then) {
+  self->request(self->state.agent, caf::infinite, atom::get_v, atom::stats_v)
+    .then(
+      [self, then](routing_stats& rs) mutable {
+        self->state.self_id = rs.self;
+        then();
+      },
+      [then](caf::error&) mutable { then(); });
 }
 
 void tick(asl_impl self) {
   auto& st = self->state;
   auto now = self->clock().now();
   if (++st.ticks % 10 == 1)
-    self->request(st.agent, caf::infinite, atom::get_v, atom::stats_v)
-      .then([self](routing_stats& rs) { self->state.self_id = rs.self; },
-            [](caf::error&) {});
-  // Modules gone for longer than the grace period.
-  for (auto i = st.unreachable_since.begin(); i != st.unreachable_since.end();) {
-    if (now - i->second >= st.cfg.unreachable_grace) {
-      auto m = i->first;
-      i = st.unreachable_since.erase(i);
-      module_lost(self, m);
-    } else {
-      ++i;
-    }
-  }
+    refresh_self_id(self, [] {});
+  for (auto m : st.reach.lost(now, st.cfg.unreachable_grace))
+    module_lost(self, m);
   // Deadlines.
   for (auto& out : st.pending->take_expired(now)) {
     ++st.stats.request_timeouts;
-    fail(self, out, timeout_error(self, out));
+    auto b = st.bindings.find(out.binding);
+    auto target = b != nullptr && b->bound ? b->target.module : no_module;
+    fail(self, out,
+         asl_error::deadline(out.reliable, target, reachable(self, target),
+                             out.tx.dst, st.cfg.request_timeout));
   }
   st.server->expire(now);
   // Reliable mode: copies due, expired cache entries.
   send_due(self);
   st.reliable.expire(now);
   // Bindings: renew watches, look for new targets.
-  auto due = st.bindings.due(now, st.cfg.watch_refresh);
-  for (auto id : due.watch)
-    watch(self, *st.bindings.find(id));
-  for (auto id : due.search)
-    rebind_search(self, id);
+  for (auto& s : st.bindings.housekeep(now, st.cfg.watch_refresh,
+                                      st.cfg.rebind_interval, st.self_id,
+                                      st.out)) {
+    discover(self, s.query, [self, id = s.id](std::vector<apo_ref> found) {
+      auto& state = self->state;
+      if (state.bindings.found(id, found, state.self_id, self->clock().now(),
+                               state.cfg.rebind_interval, state.out)
+          && state.bindings.find(id)->reliable)
+        send_due(self, {id});
+      flush(self);
+    });
+  }
   // Topics: renew subscriptions, expire subscribers.
   st.topics.housekeep(now, st.out);
   flush(self);
@@ -751,16 +697,10 @@ caf::result<apo_ref> register_apo(asl_impl self, std::string name,
   // Right after start-up the module's id is not known here yet (the
   // periodic refresh has not run): ask the agent before answering.
   auto rp = self->make_response_promise<apo_ref>();
-  self->request(st.agent, caf::infinite, atom::get_v, atom::stats_v)
-    .then(
-      [self, rp, id, name, type](routing_stats& rs) mutable {
-        self->state.self_id = rs.self;
-        rp.deliver(apo_ref{rs.self, id, std::move(name), std::move(type)});
-      },
-      [self, rp, id, name, type](caf::error&) mutable {
-        rp.deliver(apo_ref{self->state.self_id, id, std::move(name),
-                           std::move(type)});
-      });
+  refresh_self_id(self, [self, rp, id, name, type]() mutable {
+    rp.deliver(apo_ref{self->state.self_id, id, std::move(name),
+                       std::move(type)});
+  });
   return rp;
 }
 
@@ -781,11 +721,8 @@ caf::result<caf::actor> bind_ref(asl_impl self, const apo_ref& ref,
 
 /// The handler of atom::bind with a bind_request.
 caf::result<caf::actor> bind_query(asl_impl self, const bind_request& req) {
-  if (auto err = agent_gone(self))
+  if (auto err = cannot_discover(self, req.by, req.pattern))
     return err;
-  if (req.by != query_by::any)
-    if (auto err = asl_error::check_label("a pattern", req.pattern))
-      return err;
   auto rp = self->make_response_promise<caf::actor>();
   apo_query q{req.by, req.pattern, req.timeout_ms, true};
   discover(self, q, [self, rp, req](std::vector<apo_ref> found) mutable {
@@ -813,8 +750,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
   std::random_device rd;
   auto random_key = [&rd] { return (uint64_t{rd()} << 32) | rd(); };
   init.apos = std::make_unique<apo_registry>(random_key());
-  init.discoveries
-    = std::make_unique<discovery_table>(random_key(), cfg.max_remote_apos);
+  init.discoveries = std::make_unique<discovery_table>(
+    random_key(), cfg.max_remote_apos, init.apos->table());
   init.pending
     = std::make_unique<outgoing_requests>(random_key(), cfg.max_pending);
   init.topics = topic_table{cfg.max_topic_peers, cfg.subscription_lease};
@@ -867,11 +804,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       return self->state.apos->list(self->state.self_id, self->clock().now());
     },
     [self](atom::find, apo_query& q) -> caf::result<std::vector<apo_ref>> {
-      if (auto err = agent_gone(self))
+      if (auto err = cannot_discover(self, q.by, q.pattern))
         return err;
-      if (q.by != query_by::any)
-        if (auto err = asl_error::check_label("a pattern", q.pattern))
-          return err;
       if (q.by == query_by::any)
         q.pattern.clear();
       auto rp = self->make_response_promise<std::vector<apo_ref>>();
@@ -947,20 +881,23 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       result.publications_lost = ts.publications_lost;
       result.subscribers_refused = ts.subscribers_refused;
       result.publishers_refused = ts.publishers_refused;
-      result.discovery_entries_refused
-        = st.discoveries->stats().discovery_entries_refused;
+      auto& ds = st.discoveries->stats();
+      result.queries_sent = ds.queries_sent;
+      result.queries_answered = ds.queries_answered;
+      result.answers_received = ds.answers_received;
+      result.remote_apos_refused = ds.remote_apos_refused;
+      result.discovery_entries_refused = ds.discovery_entries_refused;
       return result;
     },
     [self](packet_delivered& pkt) { on_packet(self, pkt); },
     [self](reachability& r) {
       auto& st = self->state;
       if (r.reachable) {
-        st.reachable.insert(r.id);
-        st.unreachable_since.erase(r.id);
+        st.reach.up(r.id);
         // Reliable requests waiting for this module go now.
-        send_due(self, 0, r.id);
-      } else if (st.reachable.erase(r.id) > 0) {
-        st.unreachable_since.emplace(r.id, self->clock().now());
+        send_due(self, st.bindings.bound_to(r.id, 0), true);
+      } else {
+        st.reach.down(r.id, self->clock().now());
       }
     },
     [self](atom::forward, uint32_t id, caf::strong_actor_ptr& sender,
@@ -971,9 +908,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       on_reply(self, local, msg);
     },
     [self](atom::close, uint32_t id) {
-      auto& st = self->state;
-      if (auto target = st.bindings.close(id, st.self_id))
-        transmit(self, target->module, asl_unwatch{target->apo});
+      self->state.bindings.close(id, self->state.self_id, self->state.out);
+      flush(self);
     },
     [self](atom::done, uint32_t qid) { finish_discovery(self, qid); },
     [self](atom::tick) { tick(self); },

@@ -96,6 +96,24 @@ caf::error not_found(query_by by, const std::string& pattern, uint32_t ms) {
                       + " ms");
 }
 
+caf::error unreachable(module_id m) {
+  return make_error(routing_ec::no_route,
+                    "module " + to_hex(m) + " unreachable");
+}
+
+caf::error deadline(bool reliable, module_id target, bool target_reachable,
+                    module_id dst, std::chrono::milliseconds timeout) {
+  auto within = " within " + std::to_string(timeout.count()) + " ms";
+  if (reliable && target == no_module)
+    return apo_gone("no APO to send it to" + within);
+  if (reliable && !target_reachable)
+    return make_error(routing_ec::no_route, "module " + to_hex(target)
+                                              + " stayed unreachable"
+                                              + within);
+  return make_error(ec::timeout,
+                    "no response from module " + to_hex(dst) + within);
+}
+
 caf::error agent_stopped(module_id self, const caf::error& reason) {
   return make_error(app_ec::unavailable, "the routing agent of module "
                                            + to_hex(self) + " stopped ("

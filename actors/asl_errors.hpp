@@ -4,6 +4,7 @@
 // cross the wire (asl_response, asl_down). Pure functions, no state; every
 // one is O(length of the texts involved).
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -60,6 +61,18 @@ caf::error unauthorized(const std::string& name, module_id self);
 
 /// app_ec::not_found: nothing matched a binding's query within `ms`.
 caf::error not_found(query_by by, const std::string& pattern, uint32_t ms);
+
+/// routing_ec::no_route: module `m` stayed unreachable past the grace
+/// period.
+caf::error unreachable(module_id m);
+
+/// The error of a request whose deadline (`timeout` after it was made)
+/// passed: app_ec::apo_gone when a reliable one had no target
+/// (`target` 0), routing_ec::no_route when a reliable one's `target`
+/// module stayed unreachable (`target_reachable` false), else ec::timeout
+/// naming module `dst` (where it went).
+caf::error deadline(bool reliable, module_id target, bool target_reachable,
+                    module_id dst, std::chrono::milliseconds timeout);
 
 /// app_ec::unavailable: the routing agent of `self` stopped for `reason`.
 caf::error agent_stopped(module_id self, const caf::error& reason);

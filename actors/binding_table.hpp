@@ -5,8 +5,8 @@
 // periodically) or, for a rebinding proxy between targets, what it looks
 // for and when to look next.
 //
-// No clock and no I/O: time comes in as arguments; the caller creates and
-// ends proxies and sends watches. Proxies are held weakly (a binding never
+// No clock and no I/O: time comes in as arguments, watches go into the
+// caller's asl_outbox; the caller creates and ends proxies. Proxies are held weakly (a binding never
 // keeps one alive). Not thread-safe (one actor owns it). One binding per
 // live proxy; find and add are O(log n), the scans O(n).
 
@@ -22,6 +22,7 @@
 #include "caf/weak_intrusive_ptr.hpp"
 
 #include "actors/app_support.hpp"
+#include "actors/asl_outbox.hpp"
 
 namespace herm {
 
@@ -43,13 +44,6 @@ struct binding {
   bool reliable = false;
   /// ... and signed (apo_access::signed_only).
   bool sign = false;
-
-  /// The watch of the target is (re)newed at `now`: true if the target is
-  /// on another module than `self` (then a watch is to be sent there).
-  bool watch(module_id self, time_point now) {
-    last_watch = now;
-    return target.module != self;
-  }
 };
 
 class binding_table {
@@ -63,6 +57,11 @@ public:
   /// The binding, or nullptr.
   binding* find(uint32_t id);
 
+  /// Points `b` at `ref` at `now` and watches it (if it is not on module
+  /// `self`).
+  static void bind(binding& b, const apo_ref& ref, module_id self,
+                   time_point now, asl_outbox& out);
+
   /// Every bound binding to APO `apo` on module `m` (`apo` 0: any there).
   std::vector<uint32_t> bound_to(module_id m, uint32_t apo) const;
 
@@ -71,19 +70,32 @@ public:
   /// other is removed, and its proxy (if still alive) returned to be ended.
   caf::strong_actor_ptr lose(uint32_t id, time_point now);
 
-  /// Nobody holds binding `id`'s proxy any more: removes it. Returns its
-  /// target when it was the last binding to that remote APO (not on
-  /// module `self`), to be unwatched.
-  std::optional<apo_ref> close(uint32_t id, module_id self);
+  /// Nobody holds binding `id`'s proxy any more: removes it. When it was
+  /// the last binding to a remote APO (not on module `self`), the watch
+  /// ends.
+  void close(uint32_t id, module_id self, asl_outbox& out);
 
-  struct due_list {
-    /// Bound, watched `watch_refresh` ago or longer: renew the watch.
-    std::vector<uint32_t> watch;
-    /// Rebinding, unbound, not searching, next_search reached: search.
-    std::vector<uint32_t> search;
+  /// A discovery to start for a rebinding binding without a target.
+  struct search {
+    uint32_t id = 0;
+    /// Collects for half of rebind_interval, ends at the first match.
+    apo_query query;
   };
 
-  due_list due(time_point now, std::chrono::milliseconds watch_refresh) const;
+  /// Renews the watches made `watch_refresh` ago or longer; returns the
+  /// searches to start now (for bindings unbound, not searching, whose
+  /// next_search came; they are searching from now on).
+  std::vector<search> housekeep(time_point now,
+                                std::chrono::milliseconds watch_refresh,
+                                std::chrono::milliseconds rebind_interval,
+                                module_id self, asl_outbox& out);
+
+  /// The search for binding `id` ended at `now` with `found`: the next one
+  /// is due `rebind_interval` later, and an unbound binding is bound to
+  /// the first match. True if it was bound now.
+  bool found(uint32_t id, const std::vector<apo_ref>& found, module_id self,
+             time_point now, std::chrono::milliseconds rebind_interval,
+             asl_outbox& out);
 
   const std::map<uint32_t, binding>& all() const {
     return bindings_;
@@ -94,6 +106,9 @@ public:
   }
 
 private:
+  static void watch(binding& b, module_id self, time_point now,
+                    asl_outbox& out);
+
   uint32_t next_ = 1;
   std::map<uint32_t, binding> bindings_;
 };

@@ -4,21 +4,26 @@
 
 namespace herm {
 
-discovery_table::discovery_table(uint64_t key, size_t max_found)
-  : ids_(key), max_found_(max_found) {
+discovery_table::discovery_table(uint64_t key, size_t max_found,
+                                 app_table& table)
+  : ids_(key), max_found_(max_found), table_(table) {
   // nop
 }
 
-uint32_t discovery_table::start(apo_query q, std::vector<apo_ref> local,
-                                callback finish) {
+uint32_t discovery_table::start(apo_query q, module_id self, callback finish,
+                                asl_outbox& out) {
   auto qid = ids_.next();
   while (running_.count(qid) != 0)
     qid = ids_.next();
   auto& d = running_[qid];
   d.query = std::move(q);
-  d.found.insert(std::make_move_iterator(local.begin()),
-                 std::make_move_iterator(local.end()));
+  for (auto& e : table_.match(d.query.by, d.query.pattern))
+    d.found.insert(apo_ref{self, e.apo, e.name, e.type});
   d.finish = std::move(finish);
+  if (!satisfied(qid)) {
+    out.push(broadcast_module, asl_query{qid, d.query.by, d.query.pattern});
+    ++stats_.queries_sent;
+  }
   return qid;
 }
 
@@ -28,13 +33,35 @@ bool discovery_table::satisfied(uint32_t qid) const {
          && !i->second.found.empty();
 }
 
-bool discovery_table::answered(uint32_t qid, module_id src,
-                               const std::vector<asl_entry>& entries) {
-  auto i = running_.find(qid);
+void discovery_table::on_query(module_id src, const asl_query& q,
+                               asl_outbox& out) {
+  auto matches = table_.match(q.by, q.pattern);
+  if (matches.empty())
+    return;
+  ++stats_.queries_answered;
+  asl_answer a{q.query_id, {}};
+  for (auto& e : matches) {
+    a.entries.push_back(std::move(e));
+    if (a.entries.size() == max_answer_entries) {
+      out.push(src, a);
+      a.entries.clear();
+    }
+  }
+  if (!a.entries.empty())
+    out.push(src, std::move(a));
+}
+
+bool discovery_table::on_answer(module_id src, const asl_answer& a,
+                                time_point now) {
+  ++stats_.answers_received;
+  for (auto& e : a.entries)
+    if (!table_.learn(src, e, now, max_found_))
+      ++stats_.remote_apos_refused;
+  auto i = running_.find(a.query_id);
   if (i == running_.end())
     return false;
   auto& d = i->second;
-  for (auto& e : entries)
+  for (auto& e : a.entries)
     if (app_table::matches(d.query.by, d.query.pattern, e.name, e.type)) {
       apo_ref ref{src, e.apo, e.name, e.type};
       if (d.found.size() >= max_found_ && d.found.count(ref) == 0)
@@ -42,7 +69,7 @@ bool discovery_table::answered(uint32_t qid, module_id src,
       else
         d.found.insert(std::move(ref));
     }
-  return satisfied(qid);
+  return satisfied(a.query_id);
 }
 
 std::optional<discovery_table::finished>

@@ -1,15 +1,20 @@
 #pragma once
 
-// The discoveries one application support actor has running (pure core;
-// docs/protocol.md, "Discovery"): per query id, what is looked for, the
-// matches collected so far and whom to tell at the end. The caller sends
-// the query, answers it, and ends each discovery when its time is over
-// (or as soon as it is satisfied).
+// Discovery for one application support actor (pure core; docs/protocol.md,
+// "Discovery"): the discoveries running, per query id what is looked for,
+// the matches collected so far and whom to tell at the end; the answers to
+// other modules' queries; and what their answers teach the application
+// table about remote APOs.
 //
-// No clock and no I/O. Not thread-safe (one actor owns it). Each discovery
-// holds at most `max_found` matches (more distinct ones are refused and
-// counted); start and answered are O(e log f) for e entries and f found.
+// No clock and no I/O: time comes in as arguments, queries and answers go
+// into the caller's asl_outbox, and the caller ends each discovery when its
+// time is over (or as soon as it is satisfied). Works on the module's
+// app_table, which must outlive it. Not thread-safe (one actor owns it).
+// Each discovery holds at most `max_found` matches and the table at most
+// `max_found` remote APOs (more are refused, counted); start and answers
+// are O(e log f) for e entries and f found.
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -19,35 +24,51 @@
 
 #include "actors/app_support.hpp"
 #include "actors/app_table.hpp"
+#include "actors/asl_outbox.hpp"
 
 namespace herm {
 
 class discovery_table {
 public:
+  using time_point = app_table::time_point;
+
   /// Called once with the matches when a discovery ends.
   using callback = std::function<void(std::vector<apo_ref>)>;
 
+  /// What the class counted (app_support_stats names them the same).
   struct counters {
+    uint64_t queries_sent = 0;
+    uint64_t queries_answered = 0;
+    uint64_t answers_received = 0;
+    /// Answer entries not remembered in the table: it holds max_found.
+    uint64_t remote_apos_refused = 0;
     /// Matching answer entries not collected: max_found held already.
     uint64_t discovery_entries_refused = 0;
   };
 
   /// Query ids come from a scrambled_sequence keyed with `key` (one id
   /// seen gives away no other).
-  discovery_table(uint64_t key, size_t max_found);
+  discovery_table(uint64_t key, size_t max_found, app_table& table);
 
-  /// Starts a discovery of `q` with the matches on this module (`local`,
-  /// not bounded): returns its query id, never 0 or one running.
-  uint32_t start(apo_query q, std::vector<apo_ref> local, callback finish);
+  /// Starts a discovery of `q` with the matches on this module (`self`'s,
+  /// not bounded): returns its query id, never 0 or one running. Unless it
+  /// is satisfied already, the query is broadcast.
+  uint32_t start(apo_query q, module_id self, callback finish,
+                 asl_outbox& out);
 
   /// Whether discovery `qid` may end now: it wants the first answer and
   /// has a match. False for an unknown id.
   bool satisfied(uint32_t qid) const;
 
-  /// Module `src` answered `entries` to `qid`: collects those that match.
-  /// Returns satisfied(qid). An unknown (ended, forged) id is ignored.
-  bool answered(uint32_t qid, module_id src,
-                const std::vector<asl_entry>& entries);
+  /// Module `src` asks for the APOs here: they are answered in answers of
+  /// at most max_answer_entries entries; nothing is sent without a match.
+  void on_query(module_id src, const asl_query& q, asl_outbox& out);
+
+  /// Module `src` answered at `now`: its entries are learned (refreshed
+  /// entries always fit) and those matching a running discovery collected.
+  /// Returns satisfied(a.query_id); an unknown (ended, forged) id collects
+  /// nothing.
+  bool on_answer(module_id src, const asl_answer& a, time_point now);
 
   struct finished {
     callback finish;
@@ -74,6 +95,7 @@ private:
 
   scrambled_sequence<uint32_t> ids_;
   size_t max_found_;
+  app_table& table_;
   counters stats_;
   std::map<uint32_t, discovery> running_;
 };

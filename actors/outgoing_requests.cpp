@@ -1,5 +1,7 @@
 #include "actors/outgoing_requests.hpp"
 
+#include <algorithm>
+
 namespace herm {
 
 outgoing_requests::outgoing_requests(uint64_t key, size_t max_pending)
@@ -55,6 +57,22 @@ std::vector<outgoing> outgoing_requests::take_waiting_on(uint32_t binding,
 
 std::vector<outgoing> outgoing_requests::take_expired(time_point now) {
   return take_if([&](const outgoing& out) { return out.deadline <= now; });
+}
+
+std::vector<uint64_t>
+outgoing_requests::due(time_point now, const std::vector<uint32_t>& forced,
+                       bool unacked_only) const {
+  std::vector<uint64_t> result;
+  for (auto& [rid, out] : requests_) {
+    if (!out.reliable)
+      continue;
+    bool force = std::find(forced.begin(), forced.end(), out.binding)
+                   != forced.end()
+                 && !(unacked_only && out.tx.acked);
+    if (force || out.tx.next_send <= now)
+      result.push_back(rid);
+  }
+  return result;
 }
 
 std::vector<outgoing> outgoing_requests::take_all() {

@@ -90,6 +90,19 @@ public:
   /// Removes and returns all.
   std::vector<outgoing> take_all();
 
+  /// The reliable requests to look at now, in id order: those whose
+  /// next_send is not after `now`, and those of the bindings in `forced`
+  /// (all of them, or with `unacked_only` those the receiver did not ack).
+  std::vector<uint64_t> due(time_point now,
+                            const std::vector<uint32_t>& forced,
+                            bool unacked_only) const;
+
+  /// The request, or nullptr.
+  outgoing* find(uint64_t rid) {
+    auto i = requests_.find(rid);
+    return i != requests_.end() ? &i->second : nullptr;
+  }
+
   std::map<uint64_t, outgoing>& all() {
     return requests_;
   }
