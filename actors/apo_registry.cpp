@@ -5,7 +5,8 @@
 
 namespace herm {
 
-apo_registry::apo_registry(uint64_t key) : table_(key) {
+apo_registry::apo_registry(uint64_t key, size_t max_watches)
+  : table_(key), max_watches_(max_watches) {
   // nop
 }
 
@@ -27,6 +28,7 @@ caf::expected<uint32_t> apo_registry::add(std::string name, std::string type,
   numbers_.emplace(apo.address(), id);
   if (access == apo_access::signed_only)
     signed_only_.insert(id);
+  ++stats_.registered;
   return id;
 }
 
@@ -40,17 +42,42 @@ uint32_t apo_registry::number_of(const caf::actor_addr& who) const {
   return i != numbers_.end() ? i->second : 0;
 }
 
-std::optional<apo_registry::removed> apo_registry::remove(uint32_t apo) {
+std::optional<std::string> apo_registry::remove(uint32_t apo,
+                                                const caf::error& reason,
+                                                asl_outbox& out) {
   auto entry = table_.local(apo);
   if (entry == nullptr)
     return std::nullopt;
-  removed result{entry->name, table_.remove_local(apo)};
+  auto name = entry->name;
+  auto watchers = table_.remove_local(apo);
   signed_only_.erase(apo);
   if (auto i = apos_.find(apo); i != apos_.end()) {
     numbers_.erase(i->second.address());
     apos_.erase(i);
   }
-  return result;
+  ++stats_.withdrawn;
+  for (auto m : watchers)
+    out.push(m, asl_down{apo, to_wire(reason)});
+  out.push(broadcast_module, asl_withdraw{apo, name});
+  return name;
+}
+
+void apo_registry::on_watch(module_id src, const asl_watch& w,
+                            module_id self, asl_outbox& out) {
+  bool refused = false;
+  if (!table_.watch(w.apo, src, max_watches_, &refused))
+    out.push(src, asl_down{w.apo, to_wire(asl_error::no_such_apo(w.apo, self))});
+  else if (refused)
+    ++stats_.watches_refused;
+}
+
+void apo_registry::report(app_support_stats& s) const {
+  s.registered = stats_.registered;
+  s.withdrawn = stats_.withdrawn;
+  s.watches_refused = stats_.watches_refused;
+  s.local_apos = static_cast<uint32_t>(table_.locals().size());
+  s.known_remote_apos = static_cast<uint32_t>(table_.remotes().size());
+  s.watches = static_cast<uint32_t>(table_.watches());
 }
 
 std::vector<apo_info> apo_registry::list(module_id self, time_point now) const {

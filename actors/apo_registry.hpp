@@ -5,9 +5,12 @@
 // remote APOs learned) and, per local APO, its actor handle and who may use
 // it (apo_access).
 //
-// No clock and no I/O: time comes in as arguments; handles are held, never
-// used. Not thread-safe (one actor owns it). One entry per registered APO;
-// add, find, remove O(log n), list O(n).
+// No clock and no I/O: time comes in as arguments, what is to be sent goes
+// into the caller's asl_outbox; handles are held, never used. Not
+// thread-safe (one actor owns it). One entry per registered APO, at most
+// `max_watches` watches by other modules over all of them (more are
+// refused, counted); add, find, remove O(log n + w) for w watchers, list
+// O(n).
 
 #include <chrono>
 #include <cstdint>
@@ -23,6 +26,7 @@
 
 #include "actors/app_support.hpp"
 #include "actors/app_table.hpp"
+#include "actors/asl_outbox.hpp"
 
 namespace herm {
 
@@ -30,8 +34,15 @@ class apo_registry {
 public:
   using time_point = app_table::time_point;
 
+  /// What the class counted (app_support_stats names them the same).
+  struct counters {
+    uint64_t registered = 0;
+    uint64_t withdrawn = 0;
+    uint64_t watches_refused = 0;
+  };
+
   /// `key` seeds the APO numbers (app_table).
-  explicit apo_registry(uint64_t key);
+  explicit apo_registry(uint64_t key, size_t max_watches = SIZE_MAX);
 
   app_table& table() {
     return table_;
@@ -58,14 +69,30 @@ public:
     return signed_only_.count(apo) != 0;
   }
 
-  struct removed {
-    std::string name;
-    /// The modules that watched it.
-    std::set<module_id> watchers;
-  };
+  /// Unregisters local APO `apo`, which ended for `reason`: its watchers
+  /// hear so, and its withdrawal is broadcast. Returns its name; nullopt if
+  /// there is no such APO.
+  std::optional<std::string> remove(uint32_t apo, const caf::error& reason,
+                                    asl_outbox& out);
 
-  /// Unregisters local APO `apo`; nullopt if there is none.
-  std::optional<removed> remove(uint32_t apo);
+  /// Module `src` watches local APO `w.apo`: told at once if there is no
+  /// such APO on this module (`self`); refused silently (counted) past
+  /// max_watches (the watcher finds out by renewing).
+  void on_watch(module_id src, const asl_watch& w, module_id self,
+                asl_outbox& out);
+
+  void on_unwatch(module_id src, const asl_unwatch& w) {
+    table_.unwatch(w.apo, src);
+  }
+
+  const counters& stats() const {
+    return stats_;
+  }
+
+  /// Writes its counters (and sizes) into `s`, under the names
+  /// app_support_stats gives them.
+  void report(app_support_stats& s) const;
+
 
   /// The application table for people: the local APOs (as module `self`'s,
   /// with their watcher counts), then the remote ones with their age at
@@ -74,6 +101,8 @@ public:
 
 private:
   app_table table_;
+  size_t max_watches_;
+  counters stats_;
   std::map<uint32_t, caf::actor> apos_;
   std::map<caf::actor_addr, uint32_t> numbers_;
   std::set<uint32_t> signed_only_;

@@ -39,13 +39,12 @@ struct asl_state {
     auto reason = make_error(routing_ec::no_route, "the application support "
                                                    "layer of this module "
                                                    "stopped");
-    for (auto& kv : bindings.all())
-      if (auto p = kv.second.proxy.lock())
-        detail::kill_apo_proxy(p, reason, nullptr);
-    for (auto& kv : pending->all())
-      if (kv.second.sender)
-        kv.second.sender->enqueue(nullptr, kv.second.mid.response_id(),
-                                  caf::make_message(reason), nullptr);
+    for (auto& p : bindings.take_proxies())
+      detail::kill_apo_proxy(p, reason, nullptr);
+    for (auto& req : pending->take_all())
+      if (req.sender)
+        req.sender->enqueue(nullptr, req.mid.response_id(),
+                            caf::make_message(reason), nullptr);
   }
 
   app_support_config cfg;
@@ -183,24 +182,22 @@ void bind_to(asl_impl self, binding& b, const apo_ref& ref) {
   flush(self);
 }
 
-/// A new proxy bound to `ref` (or, unbound, looking for `req`).
-caf::actor make_binding(asl_impl self, const apo_ref* ref,
-                        const bind_request* req, bool reliable = false,
-                        bool sign = false) {
+/// A new proxy bound to `ref` (rebinding as `req` says, if given).
+caf::actor make_binding(asl_impl self, const apo_ref& ref, bool reliable,
+                        bool sign, const bind_request* req = nullptr) {
   auto& st = self->state;
   auto [id, b] = st.bindings.add(self->clock().now());
   auto proxy = detail::make_apo_proxy(self->system(),
                                       caf::actor_cast<caf::actor>(self), id);
   b.proxy = caf::actor_cast<caf::weak_actor_ptr>(proxy);
-  b.reliable = req != nullptr ? req->reliable : reliable;
+  b.reliable = reliable;
   b.sign = sign;
   if (req != nullptr) {
     b.rebind = req->rebind;
     b.by = req->by;
     b.pattern = req->pattern;
   }
-  if (ref != nullptr)
-    bind_to(self, b, *ref);
+  bind_to(self, b, ref);
   return proxy;
 }
 
@@ -487,30 +484,16 @@ void on_down_remote(asl_impl self, module_id src, uint32_t apo,
   }
 }
 
-void on_watch(asl_impl self, module_id src, uint32_t apo) {
-  auto& st = self->state;
-  bool refused = false;
-  if (!st.apos->table().watch(apo, src, st.cfg.max_watches, &refused))
-    transmit(self, src,
-             asl_down{apo, to_wire(asl_error::no_such_apo(apo, st.self_id))});
-  else if (refused)
-    ++st.stats.watches_refused;
-}
-
 /// Local APO `apo` left the table (exited or unregistered).
 void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
   auto& st = self->state;
-  auto gone = st.apos->remove(apo);
-  if (!gone)
-    return;
-  auto& name = gone->name;
-  ++st.stats.withdrawn;
-  for (auto m : gone->watchers)
-    transmit(self, m, asl_down{apo, to_wire(reason)});
-  transmit(self, broadcast_module, asl_withdraw{apo, name});
+  auto name = st.apos->remove(apo, reason, st.out);
+  flush(self);
   // Rebinding proxies of this module bound to it.
-  for (auto id : st.bindings.bound_to(st.self_id, apo))
-    lose_target(self, id, reason, asl_error::apo_gone("APO '" + name + "' exited"));
+  if (name)
+    for (auto id : st.bindings.bound_to(st.self_id, apo))
+      lose_target(self, id, reason,
+                  asl_error::apo_gone("APO '" + *name + "' exited"));
 }
 
 // -- topics --------------------------------------------------------------------------
@@ -569,12 +552,11 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
       } else if constexpr (std::is_same_v<T, asl_ack>) {
         on_ack(self, src, x);
       } else if constexpr (std::is_same_v<T, asl_watch>) {
-        on_watch(self, src, x.apo);
+        st.apos->on_watch(src, x, st.self_id, st.out);
       } else if constexpr (std::is_same_v<T, asl_unwatch>) {
-        st.apos->table().unwatch(x.apo, src);
+        st.apos->on_unwatch(src, x);
       } else if constexpr (std::is_same_v<T, asl_down>) {
-        auto reason = from_wire(x.reason);
-        on_down_remote(self, src, x.apo, reason ? reason : caf::error{});
+        on_down_remote(self, src, x.apo, from_wire(x.reason));
       } else if constexpr (std::is_same_v<T, asl_withdraw>) {
         on_down_remote(self, src, x.apo, asl_error::apo_gone("withdrawn"));
       } else if constexpr (std::is_same_v<T, asl_subscribe>) {
@@ -672,11 +654,9 @@ void agent_stopped(asl_impl self, const caf::error& reason) {
   auto err = agent_gone(self);
   for (auto& out : st.pending->take_all())
     fail(self, out, err);
-  for (auto& kv : st.bindings.all())
-    if (auto p = kv.second.proxy.lock())
-      if (detail::kill_apo_proxy(p, err, self->context()))
-        ++st.stats.proxies_ended;
-  st.bindings.clear();
+  for (auto& p : st.bindings.take_proxies())
+    if (detail::kill_apo_proxy(p, err, self->context()))
+      ++st.stats.proxies_ended;
   for (auto qid : st.discoveries->running())
     finish_discovery(self, qid);
 }
@@ -691,7 +671,6 @@ caf::result<apo_ref> register_apo(asl_impl self, std::string name,
     return std::move(added.error());
   auto id = *added;
   self->monitor(apo);
-  ++st.stats.registered;
   if (st.self_id != no_module)
     return apo_ref{st.self_id, id, std::move(name), std::move(type)};
   // Right after start-up the module's id is not known here yet (the
@@ -716,7 +695,7 @@ caf::result<caf::actor> bind_ref(asl_impl self, const apo_ref& ref,
     return err;
   if (!reachable(self, ref.module))
     return asl_error::no_route_to(ref.module);
-  return make_binding(self, &ref, nullptr, reliable, sign);
+  return make_binding(self, ref, reliable, sign);
 }
 
 /// The handler of atom::bind with a bind_request.
@@ -734,7 +713,7 @@ caf::result<caf::actor> bind_query(asl_impl self, const bind_request& req) {
       else
         rp.deliver(asl_error::apo_gone(describe(found.front())));
     } else {
-      rp.deliver(make_binding(self, &found.front(), &req));
+      rp.deliver(make_binding(self, found.front(), req.reliable, false, &req));
     }
   });
   return rp;
@@ -749,7 +728,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
   init.agent = agent;
   std::random_device rd;
   auto random_key = [&rd] { return (uint64_t{rd()} << 32) | rd(); };
-  init.apos = std::make_unique<apo_registry>(random_key());
+  init.apos = std::make_unique<apo_registry>(random_key(), cfg.max_watches);
   init.discoveries = std::make_unique<discovery_table>(
     random_key(), cfg.max_remote_apos, init.apos->table());
   init.pending
@@ -855,38 +834,14 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       auto& st = self->state;
       auto result = st.stats;
       result.self = st.self_id;
-      result.local_apos = static_cast<uint32_t>(st.apos->table().locals().size());
-      result.known_remote_apos = static_cast<uint32_t>(st.apos->table().remotes().size());
       result.live_bindings = static_cast<uint32_t>(st.bindings.all().size());
       result.pending_requests = static_cast<uint32_t>(st.pending->size());
-      result.cached_responses = static_cast<uint32_t>(st.reliable.cached());
-      result.watches = static_cast<uint32_t>(st.apos->table().watches());
       result.unexpected_messages = unexpected_messages();
-      auto& rs = st.reliable.stats();
-      result.retransmissions = rs.retransmissions;
-      result.reliable_waited = rs.reliable_waited;
-      result.duplicates_suppressed = rs.duplicates_suppressed;
-      result.late_duplicates = rs.late_duplicates;
-      auto& ss = st.server->stats();
-      result.requests_served = ss.requests_served;
-      result.oneway_delivered = ss.oneway_delivered;
-      result.acks_sent = ss.acks_sent;
-      result.rx_unauthorized = ss.rx_unauthorized;
-      result.rx_unknown_apo = ss.rx_unknown_apo;
-      result.serving_refused = ss.serving_refused;
-      auto& ts = st.topics.stats();
-      result.published = ts.published;
-      result.publications_sent = ts.publications_sent;
-      result.publications_received = ts.publications_received;
-      result.publications_lost = ts.publications_lost;
-      result.subscribers_refused = ts.subscribers_refused;
-      result.publishers_refused = ts.publishers_refused;
-      auto& ds = st.discoveries->stats();
-      result.queries_sent = ds.queries_sent;
-      result.queries_answered = ds.queries_answered;
-      result.answers_received = ds.answers_received;
-      result.remote_apos_refused = ds.remote_apos_refused;
-      result.discovery_entries_refused = ds.discovery_entries_refused;
+      st.apos->report(result);
+      st.discoveries->report(result);
+      st.server->report(result);
+      st.reliable.report(result);
+      st.topics.report(result);
       return result;
     },
     [self](packet_delivered& pkt) { on_packet(self, pkt); },

@@ -51,6 +51,15 @@ void binding_table::bind(binding& b, const apo_ref& ref, module_id self,
   watch(b, self, now, out);
 }
 
+std::vector<caf::strong_actor_ptr> binding_table::take_proxies() {
+  std::vector<caf::strong_actor_ptr> result;
+  for (auto& kv : bindings_)
+    if (auto p = kv.second.proxy.lock())
+      result.push_back(std::move(p));
+  bindings_.clear();
+  return result;
+}
+
 void binding_table::close(uint32_t id, module_id self, asl_outbox& out) {
   auto i = bindings_.find(id);
   if (i == bindings_.end())

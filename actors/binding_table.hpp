@@ -101,9 +101,8 @@ public:
     return bindings_;
   }
 
-  void clear() {
-    bindings_.clear();
-  }
+  /// Removes every binding; returns their proxies still alive (to end).
+  std::vector<caf::strong_actor_ptr> take_proxies();
 
 private:
   static void watch(binding& b, module_id self, time_point now,

@@ -85,6 +85,14 @@ discovery_table::finish(uint32_t qid, module_id self) {
   return result;
 }
 
+void discovery_table::report(app_support_stats& s) const {
+  s.queries_sent = stats_.queries_sent;
+  s.queries_answered = stats_.queries_answered;
+  s.answers_received = stats_.answers_received;
+  s.remote_apos_refused = stats_.remote_apos_refused;
+  s.discovery_entries_refused = stats_.discovery_entries_refused;
+}
+
 std::vector<uint32_t> discovery_table::running() const {
   std::vector<uint32_t> result;
   for (auto& kv : running_)

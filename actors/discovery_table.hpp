@@ -86,6 +86,11 @@ public:
     return stats_;
   }
 
+  /// Writes its counters (and sizes) into `s`, under the names
+  /// app_support_stats gives them.
+  void report(app_support_stats& s) const;
+
+
 private:
   struct discovery {
     apo_query query;

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "actors/app_support.hpp"
+
 namespace herm {
 
 reliable_requests::reliable_requests(config cfg) : cfg_(cfg) {
@@ -136,6 +138,14 @@ void reliable_requests::respond(module_id src, uint64_t rid,
     i->second.done = true;
     i->second.response = r;
   }
+}
+
+void reliable_requests::report(app_support_stats& s) const {
+  s.retransmissions = stats_.retransmissions;
+  s.reliable_waited = stats_.reliable_waited;
+  s.duplicates_suppressed = stats_.duplicates_suppressed;
+  s.late_duplicates = stats_.late_duplicates;
+  s.cached_responses = static_cast<uint32_t>(cache_.size());
 }
 
 void reliable_requests::expire(time_point now) {

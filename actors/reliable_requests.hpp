@@ -27,6 +27,8 @@
 
 namespace herm {
 
+struct app_support_stats;
+
 class reliable_requests {
 public:
   using time_point = std::chrono::steady_clock::time_point;
@@ -174,6 +176,11 @@ public:
   const counters& stats() const {
     return stats_;
   }
+
+  /// Writes its counters (and sizes) into `s`, under the names
+  /// app_support_stats gives them.
+  void report(app_support_stats& s) const;
+
 
 private:
   using key = std::pair<module_id, uint64_t>;

@@ -113,6 +113,15 @@ void request_server::reply(uint64_t local,
   out.push(s.origin, std::move(r), s.sign);
 }
 
+void request_server::report(app_support_stats& s) const {
+  s.requests_served = stats_.requests_served;
+  s.oneway_delivered = stats_.oneway_delivered;
+  s.acks_sent = stats_.acks_sent;
+  s.rx_unauthorized = stats_.rx_unauthorized;
+  s.rx_unknown_apo = stats_.rx_unknown_apo;
+  s.serving_refused = stats_.serving_refused;
+}
+
 void request_server::expire(time_point now) {
   for (auto i = serving_.begin(); i != serving_.end();)
     i = i->second.deadline <= now ? serving_.erase(i) : std::next(i);

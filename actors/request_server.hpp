@@ -96,6 +96,11 @@ public:
     return stats_;
   }
 
+  /// Writes its counters (and sizes) into `s`, under the names
+  /// app_support_stats gives them.
+  void report(app_support_stats& s) const;
+
+
 private:
   /// A request a remote module made of one of our APOs.
   struct served {

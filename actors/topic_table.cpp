@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "actors/app_support.hpp"
+
 namespace herm {
 
 namespace {
@@ -148,6 +150,15 @@ const topic_table::subscribers* topic_table::on_publish(module_id src,
     ++stats_.publishers_refused;
   }
   return &t.local_subs;
+}
+
+void topic_table::report(app_support_stats& s) const {
+  s.published = stats_.published;
+  s.publications_sent = stats_.publications_sent;
+  s.publications_received = stats_.publications_received;
+  s.publications_lost = stats_.publications_lost;
+  s.subscribers_refused = stats_.subscribers_refused;
+  s.publishers_refused = stats_.publishers_refused;
 }
 
 void topic_table::module_lost(module_id m) {

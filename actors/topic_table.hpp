@@ -33,6 +33,8 @@
 
 namespace herm {
 
+struct app_support_stats;
+
 class topic_table {
 public:
   using time_point = std::chrono::steady_clock::time_point;
@@ -128,6 +130,11 @@ public:
   const counters& stats() const {
     return stats_;
   }
+
+  /// Writes its counters (and sizes) into `s`, under the names
+  /// app_support_stats gives them.
+  void report(app_support_stats& s) const;
+
 
   size_t size() const {
     return topics_.size();
