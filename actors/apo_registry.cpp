@@ -5,8 +5,9 @@
 
 namespace herm {
 
-apo_registry::apo_registry(uint64_t key, size_t max_watches)
-  : table_(key), max_watches_(max_watches) {
+apo_registry::apo_registry(uint64_t key, size_t max_watches,
+                           app_support_stats& stats)
+  : table_(key), max_watches_(max_watches), stats_(&stats) {
   // nop
 }
 
@@ -28,7 +29,7 @@ caf::expected<uint32_t> apo_registry::add(std::string name, std::string type,
   numbers_.emplace(apo.address(), id);
   if (access == apo_access::signed_only)
     signed_only_.insert(id);
-  ++stats_.registered;
+  ++stats_->registered;
   return id;
 }
 
@@ -55,7 +56,7 @@ std::optional<std::string> apo_registry::remove(uint32_t apo,
     numbers_.erase(i->second.address());
     apos_.erase(i);
   }
-  ++stats_.withdrawn;
+  ++stats_->withdrawn;
   for (auto m : watchers)
     out.push(m, asl_down{apo, to_wire(reason)});
   out.push(broadcast_module, asl_withdraw{apo, name});
@@ -68,16 +69,7 @@ void apo_registry::on_watch(module_id src, const asl_watch& w,
   if (!table_.watch(w.apo, src, max_watches_, &refused))
     out.push(src, asl_down{w.apo, to_wire(asl_error::no_such_apo(w.apo, self))});
   else if (refused)
-    ++stats_.watches_refused;
-}
-
-void apo_registry::report(app_support_stats& s) const {
-  s.registered = stats_.registered;
-  s.withdrawn = stats_.withdrawn;
-  s.watches_refused = stats_.watches_refused;
-  s.local_apos = static_cast<uint32_t>(table_.locals().size());
-  s.known_remote_apos = static_cast<uint32_t>(table_.remotes().size());
-  s.watches = static_cast<uint32_t>(table_.watches());
+    ++stats_->watches_refused;
 }
 
 std::vector<apo_info> apo_registry::list(module_id self, time_point now) const {

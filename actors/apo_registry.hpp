@@ -34,15 +34,10 @@ class apo_registry {
 public:
   using time_point = app_table::time_point;
 
-  /// What the class counted (app_support_stats names them the same).
-  struct counters {
-    uint64_t registered = 0;
-    uint64_t withdrawn = 0;
-    uint64_t watches_refused = 0;
-  };
 
-  /// `key` seeds the APO numbers (app_table).
-  explicit apo_registry(uint64_t key, size_t max_watches = SIZE_MAX);
+  /// `key` seeds the APO numbers (app_table). Counts registered,
+  /// withdrawn and watches_refused into `stats`, which must outlive it.
+  apo_registry(uint64_t key, size_t max_watches, app_support_stats& stats);
 
   app_table& table() {
     return table_;
@@ -85,13 +80,6 @@ public:
     table_.unwatch(w.apo, src);
   }
 
-  const counters& stats() const {
-    return stats_;
-  }
-
-  /// Writes its counters (and sizes) into `s`, under the names
-  /// app_support_stats gives them.
-  void report(app_support_stats& s) const;
 
 
   /// The application table for people: the local APOs (as module `self`'s,
@@ -102,7 +90,7 @@ public:
 private:
   app_table table_;
   size_t max_watches_;
-  counters stats_;
+  app_support_stats* stats_;
   std::map<uint32_t, caf::actor> apos_;
   std::map<caf::actor_addr, uint32_t> numbers_;
   std::set<uint32_t> signed_only_;

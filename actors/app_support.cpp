@@ -50,6 +50,8 @@ struct asl_state {
   app_support_config cfg;
   routing_agent_actor agent;
   module_id self_id = no_module;
+  /// Counters; the cores count into it too (so it outlives them).
+  app_support_stats stats;
   std::unique_ptr<apo_registry> apos;
   binding_table bindings;
   std::unique_ptr<outgoing_requests> pending;
@@ -58,15 +60,14 @@ struct asl_state {
   /// Why the routing agent stopped (then nothing can be sent: requests
   /// fail at once with app_ec::unavailable).
   caf::error agent_down;
-  topic_table topics;
+  std::unique_ptr<topic_table> topics;
   /// What the cores decided to send, transmitted by flush.
   asl_outbox out;
   reach_table reach;
   caf::strong_actor_ptr sink;
   /// Reliable mode: round trips, copy schedules, the duplicate cache.
-  reliable_requests reliable;
+  std::unique_ptr<reliable_requests> reliable;
   uint32_t ticks = 0;
-  app_support_stats stats;
   byte_buffer buf;
 };
 
@@ -243,14 +244,14 @@ bool send_reliable(asl_impl self, uint64_t rid, outgoing& out, time_point now) {
   auto& st = self->state;
   auto b = st.bindings.find(out.binding);
   if (b == nullptr || !b->bound) {
-    st.reliable.wait(out.tx, now); // parked: waits for a target
+    st.reliable->wait(out.tx, now); // parked: waits for a target
     return false;
   }
   auto& target = b->target;
   if (target.module == st.self_id) {
     auto a = st.apos->find(target.apo);
     if (a == nullptr) {
-      st.reliable.defer(out.tx, now);
+      st.reliable->defer(out.tx, now);
       return false;
     }
     post(self, caf::actor_cast<caf::strong_actor_ptr>(*a),
@@ -258,8 +259,8 @@ bool send_reliable(asl_impl self, uint64_t rid, outgoing& out, time_point now) {
     return true;
   }
   if (!reachable(self, target.module))
-    st.reliable.wait(out.tx, now);
-  else if (st.reliable.send(out.tx, target.module, now))
+    st.reliable->wait(out.tx, now);
+  else if (st.reliable->send(out.tx, target.module, now))
     transmit(self, target.module,
              asl_reliable_request{rid, target.apo, out.oneway, out.payload},
              b->sign);
@@ -364,7 +365,7 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
 outgoing* waiting_for(asl_impl self, uint64_t rid, module_id src, bool ack) {
   auto& st = self->state;
   auto out = st.pending->expecting(rid, src, ack);
-  if (out == nullptr && !st.reliable.late(rid))
+  if (out == nullptr && !st.reliable->late(rid))
     ++st.stats.rx_unexpected_response;
   return out;
 }
@@ -376,7 +377,7 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
     return;
   if (waiting->reliable) {
     auto& out = *waiting;
-    st.reliable.answered(out.tx, self->clock().now());
+    st.reliable->answered(out.tx, self->clock().now());
     if (!r.ok && !out.oneway) {
       // The APO is not there (any more): a rebinding proxy's request waits
       // for the next target instead of failing.
@@ -388,7 +389,7 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
         return;
       }
     }
-    st.reliable.complete(r.request_id);
+    st.reliable->complete(r.request_id);
     if (out.oneway) {
       // An error for a one-way message: nobody to tell.
       st.pending->erase(r.request_id);
@@ -422,13 +423,13 @@ void on_ack(asl_impl self, module_id src, const asl_ack& a) {
     return;
   ++st.stats.acks_received;
   if (out->oneway) {
-    st.reliable.answered(out->tx, self->clock().now());
-    st.reliable.complete(a.request_id);
+    st.reliable->answered(out->tx, self->clock().now());
+    st.reliable->complete(a.request_id);
     st.pending->erase(a.request_id);
     return;
   }
   // Being served: probe at the slowest pace until the response comes.
-  st.reliable.acknowledged(out->tx, self->clock().now());
+  st.reliable->acknowledged(out->tx, self->clock().now());
 }
 
 // -- requests: the receiver ----------------------------------------------------------
@@ -516,7 +517,7 @@ void on_publish_local(asl_impl self, const std::string& topic,
     ++st.stats.tx_refused;
     return;
   }
-  auto& subs = st.topics.publish(topic, msg, std::move(*payload),
+  auto& subs = st.topics->publish(topic, msg, std::move(*payload),
                                  self->clock().now(), st.out);
   flush(self);
   deliver(self, subs, msg);
@@ -560,13 +561,13 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
       } else if constexpr (std::is_same_v<T, asl_withdraw>) {
         on_down_remote(self, src, x.apo, asl_error::apo_gone("withdrawn"));
       } else if constexpr (std::is_same_v<T, asl_subscribe>) {
-        st.topics.on_subscribe(src, x, now, st.out);
+        st.topics->on_subscribe(src, x, now, st.out);
       } else if constexpr (std::is_same_v<T, asl_unsubscribe>) {
-        st.topics.on_unsubscribe(src, x);
+        st.topics->on_unsubscribe(src, x);
       } else if constexpr (std::is_same_v<T, asl_advertise>) {
-        st.topics.on_advertise(src, x, now, st.out);
+        st.topics->on_advertise(src, x, now, st.out);
       } else if constexpr (std::is_same_v<T, asl_publish>) {
-        if (auto subs = st.topics.on_publish(src, x))
+        if (auto subs = st.topics->on_publish(src, x))
           if (auto value = unmarshal_counted(self, x.payload))
             deliver(self, *subs, *value);
       }
@@ -589,7 +590,7 @@ void module_lost(asl_impl self, module_id m) {
   fail_pending(self, 0, m, err, true);
   st.apos->table().drop_watcher(m);
   st.apos->table().forget_module(m);
-  st.topics.module_lost(m);
+  st.topics->module_lost(m);
 }
 
 /// Asks the routing agent for this module's id (kept if it does not
@@ -624,7 +625,7 @@ void tick(asl_impl self) {
   st.server->expire(now);
   // Reliable mode: copies due, expired cache entries.
   send_due(self);
-  st.reliable.expire(now);
+  st.reliable->expire(now);
   // Bindings: renew watches, look for new targets.
   for (auto& s : st.bindings.housekeep(now, st.cfg.watch_refresh,
                                       st.cfg.rebind_interval, st.self_id,
@@ -639,7 +640,7 @@ void tick(asl_impl self) {
     });
   }
   // Topics: renew subscriptions, expire subscribers.
-  st.topics.housekeep(now, st.out);
+  st.topics->housekeep(now, st.out);
   flush(self);
   st.apos->table().expire(now, st.cfg.remote_entry_ttl);
   self->delayed_send(self, st.cfg.tick, atom::tick_v);
@@ -728,19 +729,24 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
   init.agent = agent;
   std::random_device rd;
   auto random_key = [&rd] { return (uint64_t{rd()} << 32) | rd(); };
-  init.apos = std::make_unique<apo_registry>(random_key(), cfg.max_watches);
+  init.apos = std::make_unique<apo_registry>(random_key(), cfg.max_watches,
+                                             init.stats);
   init.discoveries = std::make_unique<discovery_table>(
-    random_key(), cfg.max_remote_apos, init.apos->table());
+    random_key(), cfg.max_remote_apos, init.apos->table(), init.stats);
   init.pending
     = std::make_unique<outgoing_requests>(random_key(), cfg.max_pending);
-  init.topics = topic_table{cfg.max_topic_peers, cfg.subscription_lease};
-  init.reliable = reliable_requests{reliable_requests::config{
-    cfg.tick, cfg.retransmit_initial, cfg.retransmit_min, cfg.retransmit_max,
-    cfg.max_transmissions, cfg.reliable_cache, cfg.reliable_cache_ttl}};
+  init.topics = std::make_unique<topic_table>(
+    cfg.max_topic_peers, cfg.subscription_lease, init.stats);
+  init.reliable = std::make_unique<reliable_requests>(
+    reliable_requests::config{cfg.tick, cfg.retransmit_initial,
+                              cfg.retransmit_min, cfg.retransmit_max,
+                              cfg.max_transmissions, cfg.reliable_cache,
+                              cfg.reliable_cache_ttl},
+    init.stats);
   init.server = std::make_unique<request_server>(
     request_server::config{cfg.max_pending, cfg.request_timeout,
                            cfg.allow_unsigned_remote},
-    *init.apos, init.reliable);
+    *init.apos, *init.reliable, init.stats);
   init.sink = detail::make_reply_sink(self->system(),
                                       caf::actor_cast<caf::actor>(self));
   self->send(agent, atom::subscribe_v, asl_protocol,
@@ -758,7 +764,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
     }
     if (auto apo = st.apos->number_of(msg.source))
       withdraw(self, apo, msg.reason);
-    st.topics.unsubscribe(msg.source, nullptr, st.out);
+    st.topics->unsubscribe(msg.source, nullptr, st.out);
     flush(self);
   });
   self->send(self, atom::tick_v);
@@ -816,7 +822,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
         return err;
       if (!sub)
         return make_error(ec::invalid_parameter, "invalid actor handle");
-      auto t = st.topics.subscribe(topic, sub, self->clock().now(), st.out);
+      auto t = st.topics->subscribe(topic, sub, self->clock().now(), st.out);
       if (t == nullptr)
         return caf::unit;
       self->monitor(sub);
@@ -827,7 +833,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       return caf::unit;
     },
     [self](atom::unsubscribe, std::string& topic, caf::actor& sub) {
-      self->state.topics.unsubscribe(sub.address(), &topic, self->state.out);
+      self->state.topics->unsubscribe(sub.address(), &topic, self->state.out);
       flush(self);
     },
     [self](atom::get, atom::stats) -> app_support_stats {
@@ -836,12 +842,12 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       result.self = st.self_id;
       result.live_bindings = static_cast<uint32_t>(st.bindings.all().size());
       result.pending_requests = static_cast<uint32_t>(st.pending->size());
+      result.cached_responses = static_cast<uint32_t>(st.reliable->cached());
+      auto& table = st.apos->table();
+      result.local_apos = static_cast<uint32_t>(table.locals().size());
+      result.known_remote_apos = static_cast<uint32_t>(table.remotes().size());
+      result.watches = static_cast<uint32_t>(table.watches());
       result.unexpected_messages = unexpected_messages();
-      st.apos->report(result);
-      st.discoveries->report(result);
-      st.server->report(result);
-      st.reliable.report(result);
-      st.topics.report(result);
       return result;
     },
     [self](packet_delivered& pkt) { on_packet(self, pkt); },

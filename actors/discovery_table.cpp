@@ -5,8 +5,8 @@
 namespace herm {
 
 discovery_table::discovery_table(uint64_t key, size_t max_found,
-                                 app_table& table)
-  : ids_(key), max_found_(max_found), table_(table) {
+                                 app_table& table, app_support_stats& stats)
+  : ids_(key), max_found_(max_found), table_(table), stats_(&stats) {
   // nop
 }
 
@@ -22,7 +22,7 @@ uint32_t discovery_table::start(apo_query q, module_id self, callback finish,
   d.finish = std::move(finish);
   if (!satisfied(qid)) {
     out.push(broadcast_module, asl_query{qid, d.query.by, d.query.pattern});
-    ++stats_.queries_sent;
+    ++stats_->queries_sent;
   }
   return qid;
 }
@@ -38,7 +38,7 @@ void discovery_table::on_query(module_id src, const asl_query& q,
   auto matches = table_.match(q.by, q.pattern);
   if (matches.empty())
     return;
-  ++stats_.queries_answered;
+  ++stats_->queries_answered;
   asl_answer a{q.query_id, {}};
   for (auto& e : matches) {
     a.entries.push_back(std::move(e));
@@ -53,10 +53,10 @@ void discovery_table::on_query(module_id src, const asl_query& q,
 
 bool discovery_table::on_answer(module_id src, const asl_answer& a,
                                 time_point now) {
-  ++stats_.answers_received;
+  ++stats_->answers_received;
   for (auto& e : a.entries)
     if (!table_.learn(src, e, now, max_found_))
-      ++stats_.remote_apos_refused;
+      ++stats_->remote_apos_refused;
   auto i = running_.find(a.query_id);
   if (i == running_.end())
     return false;
@@ -65,7 +65,7 @@ bool discovery_table::on_answer(module_id src, const asl_answer& a,
     if (app_table::matches(d.query.by, d.query.pattern, e.name, e.type)) {
       apo_ref ref{src, e.apo, e.name, e.type};
       if (d.found.size() >= max_found_ && d.found.count(ref) == 0)
-        ++stats_.discovery_entries_refused;
+        ++stats_->discovery_entries_refused;
       else
         d.found.insert(std::move(ref));
     }
@@ -83,14 +83,6 @@ discovery_table::finish(uint32_t qid, module_id self) {
   std::stable_partition(result.found.begin(), result.found.end(),
                         [&](const apo_ref& r) { return r.module == self; });
   return result;
-}
-
-void discovery_table::report(app_support_stats& s) const {
-  s.queries_sent = stats_.queries_sent;
-  s.queries_answered = stats_.queries_answered;
-  s.answers_received = stats_.answers_received;
-  s.remote_apos_refused = stats_.remote_apos_refused;
-  s.discovery_entries_refused = stats_.discovery_entries_refused;
 }
 
 std::vector<uint32_t> discovery_table::running() const {

@@ -35,20 +35,13 @@ public:
   /// Called once with the matches when a discovery ends.
   using callback = std::function<void(std::vector<apo_ref>)>;
 
-  /// What the class counted (app_support_stats names them the same).
-  struct counters {
-    uint64_t queries_sent = 0;
-    uint64_t queries_answered = 0;
-    uint64_t answers_received = 0;
-    /// Answer entries not remembered in the table: it holds max_found.
-    uint64_t remote_apos_refused = 0;
-    /// Matching answer entries not collected: max_found held already.
-    uint64_t discovery_entries_refused = 0;
-  };
 
   /// Query ids come from a scrambled_sequence keyed with `key` (one id
-  /// seen gives away no other).
-  discovery_table(uint64_t key, size_t max_found, app_table& table);
+  /// seen gives away no other). Counts queries_sent, queries_answered,
+  /// answers_received, remote_apos_refused and discovery_entries_refused
+  /// into `stats`, which must outlive it.
+  discovery_table(uint64_t key, size_t max_found, app_table& table,
+                  app_support_stats& stats);
 
   /// Starts a discovery of `q` with the matches on this module (`self`'s,
   /// not bounded): returns its query id, never 0 or one running. Unless it
@@ -82,13 +75,6 @@ public:
   /// The ids of every discovery running, in id order.
   std::vector<uint32_t> running() const;
 
-  const counters& stats() const {
-    return stats_;
-  }
-
-  /// Writes its counters (and sizes) into `s`, under the names
-  /// app_support_stats gives them.
-  void report(app_support_stats& s) const;
 
 
 private:
@@ -101,7 +87,7 @@ private:
   scrambled_sequence<uint32_t> ids_;
   size_t max_found_;
   app_table& table_;
-  counters stats_;
+  app_support_stats* stats_;
   std::map<uint32_t, discovery> running_;
 };
 

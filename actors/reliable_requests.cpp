@@ -7,11 +7,8 @@
 
 namespace herm {
 
-reliable_requests::reliable_requests(config cfg) : cfg_(cfg) {
-  // nop
-}
-
-reliable_requests::reliable_requests() : reliable_requests(config{}) {
+reliable_requests::reliable_requests(config cfg, app_support_stats& stats)
+  : cfg_(cfg), stats_(&stats) {
   // nop
 }
 
@@ -58,7 +55,7 @@ bool reliable_requests::send(transmission& tx, module_id dst, time_point now) {
     tx.first_sent = now;
     tx.rto = rto(dst);
   } else {
-    ++stats_.retransmissions;
+    ++stats_->retransmissions;
     tx.rto = std::min(tx.acked ? cfg_.rto_max : tx.rto * 2, cfg_.rto_max);
   }
   ++tx.sends;
@@ -70,7 +67,7 @@ bool reliable_requests::send(transmission& tx, module_id dst, time_point now) {
 void reliable_requests::wait(transmission& tx, time_point now) {
   if (!tx.waited) {
     tx.waited = true;
-    ++stats_.reliable_waited;
+    ++stats_->reliable_waited;
   }
   defer(tx, now);
 }
@@ -102,7 +99,7 @@ void reliable_requests::complete(uint64_t rid) {
 bool reliable_requests::late(uint64_t rid) {
   if (completed_.count(rid) == 0)
     return false;
-  ++stats_.late_duplicates;
+  ++stats_->late_duplicates;
   return true;
 }
 
@@ -113,7 +110,7 @@ reliable_requests::duplicate(module_id src, uint64_t rid) {
   auto i = cache_.find(key{src, rid});
   if (i == cache_.end())
     return nullptr;
-  ++stats_.duplicates_suppressed;
+  ++stats_->duplicates_suppressed;
   return &i->second;
 }
 
@@ -138,14 +135,6 @@ void reliable_requests::respond(module_id src, uint64_t rid,
     i->second.done = true;
     i->second.response = r;
   }
-}
-
-void reliable_requests::report(app_support_stats& s) const {
-  s.retransmissions = stats_.retransmissions;
-  s.reliable_waited = stats_.reliable_waited;
-  s.duplicates_suppressed = stats_.duplicates_suppressed;
-  s.late_duplicates = stats_.late_duplicates;
-  s.cached_responses = static_cast<uint32_t>(cache_.size());
 }
 
 void reliable_requests::expire(time_point now) {

@@ -54,14 +54,6 @@ public:
     ms cache_ttl{15000};
   };
 
-  /// What the class counted (the actor reports them under these names in
-  /// app_support_stats).
-  struct counters {
-    uint64_t retransmissions = 0;
-    uint64_t reliable_waited = 0;
-    uint64_t duplicates_suppressed = 0;
-    uint64_t late_duplicates = 0;
-  };
 
   /// The copies of one reliable request, owned by the caller (one per
   /// request it waits for). A default one has sent nothing yet.
@@ -98,9 +90,9 @@ public:
     bool sign = false;
   };
 
-  reliable_requests();
-
-  explicit reliable_requests(config cfg);
+  /// Counts retransmissions, reliable_waited, duplicates_suppressed and
+  /// late_duplicates into `stats`, which must outlive it.
+  reliable_requests(config cfg, app_support_stats& stats);
 
   // -- sender: round trips ----------------------------------------------------
 
@@ -173,20 +165,13 @@ public:
     return cache_.size();
   }
 
-  const counters& stats() const {
-    return stats_;
-  }
-
-  /// Writes its counters (and sizes) into `s`, under the names
-  /// app_support_stats gives them.
-  void report(app_support_stats& s) const;
 
 
 private:
   using key = std::pair<module_id, uint64_t>;
 
   config cfg_;
-  counters stats_;
+  app_support_stats* stats_;
   std::map<module_id, rtt_estimate> rtt_;
   /// Completed request ids, and in completion order.
   std::set<uint64_t> completed_;

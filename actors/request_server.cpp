@@ -6,8 +6,9 @@
 namespace herm {
 
 request_server::request_server(config cfg, const apo_registry& apos,
-                               reliable_requests& reliable)
-  : cfg_(cfg), apos_(apos), reliable_(reliable) {
+                               reliable_requests& reliable,
+                               app_support_stats& stats)
+  : cfg_(cfg), apos_(apos), reliable_(reliable), stats_(&stats) {
   // nop
 }
 
@@ -24,7 +25,7 @@ void request_server::respond_error(module_id dst, uint64_t rid,
 }
 
 void request_server::ack(module_id dst, uint64_t rid, asl_outbox& out) {
-  ++stats_.acks_sent;
+  ++stats_->acks_sent;
   out.push(dst, asl_ack{rid});
 }
 
@@ -33,7 +34,7 @@ bool request_server::admit(module_id src, uint64_t rid, uint32_t apo,
                            asl_outbox& out) {
   if (apos_.signed_only(apo) && !authenticated
       && !cfg_.allow_unsigned_remote) {
-    ++stats_.rx_unauthorized;
+    ++stats_->rx_unauthorized;
     auto entry = apos_.table().local(apo);
     respond_error(src, rid,
                   asl_error::unauthorized(entry ? entry->name : "?", self),
@@ -49,7 +50,7 @@ bool request_server::admit(module_id src, uint64_t rid, uint32_t apo,
       return false;
     }
   if (apos_.find(apo) == nullptr) {
-    ++stats_.rx_unknown_apo;
+    ++stats_->rx_unknown_apo;
     respond_error(src, rid, asl_error::no_such_apo(apo, self), false, out);
     return false;
   }
@@ -74,12 +75,12 @@ request_server::accept(module_id src, uint64_t rid, uint32_t apo, bool oneway,
       reliable_.remember(src, rid, true, true, now);
       ack(src, rid, out);
     }
-    ++stats_.oneway_delivered;
+    ++stats_->oneway_delivered;
     return 0;
   }
   bool sign = apos_.signed_only(apo);
   if (serving_.size() >= cfg_.max_serving) {
-    ++stats_.serving_refused;
+    ++stats_->serving_refused;
     respond_error(src, rid, asl_error::serving_full(self), sign, out);
     return std::nullopt;
   }
@@ -88,7 +89,7 @@ request_server::accept(module_id src, uint64_t rid, uint32_t apo, bool oneway,
   auto local = next_++;
   serving_.emplace(local, served{src, rid, now + cfg_.request_timeout,
                                  reliable, sign});
-  ++stats_.requests_served;
+  ++stats_->requests_served;
   return local;
 }
 
@@ -111,15 +112,6 @@ void request_server::reply(uint64_t local,
   if (s.reliable)
     reliable_.respond(s.origin, s.origin_id, r);
   out.push(s.origin, std::move(r), s.sign);
-}
-
-void request_server::report(app_support_stats& s) const {
-  s.requests_served = stats_.requests_served;
-  s.oneway_delivered = stats_.oneway_delivered;
-  s.acks_sent = stats_.acks_sent;
-  s.rx_unauthorized = stats_.rx_unauthorized;
-  s.rx_unknown_apo = stats_.rx_unknown_apo;
-  s.serving_refused = stats_.serving_refused;
 }
 
 void request_server::expire(time_point now) {

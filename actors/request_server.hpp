@@ -9,8 +9,8 @@
 // No clock and no I/O: time comes in as arguments, responses and acks go
 // into the caller's asl_outbox, and what to deliver locally is returned.
 // The caller unmarshals and marshals (that needs an actor system). Holds
-// references to the module's apo_registry and reliable_requests, which
-// must outlive it. Not thread-safe (one actor owns it). At most
+// references to the module's apo_registry, reliable_requests and
+// app_support_stats, which must outlive it. Not thread-safe (one actor owns it). At most
 // `max_serving` requests served at once (more are refused, counted);
 // calls O(log n), expire O(n).
 
@@ -42,18 +42,11 @@ public:
     bool allow_unsigned_remote = false;
   };
 
-  /// What the class counted (app_support_stats names them the same).
-  struct counters {
-    uint64_t requests_served = 0;
-    uint64_t oneway_delivered = 0;
-    uint64_t acks_sent = 0;
-    uint64_t rx_unauthorized = 0;
-    uint64_t rx_unknown_apo = 0;
-    uint64_t serving_refused = 0;
-  };
 
+  /// Counts requests_served, oneway_delivered, acks_sent,
+  /// rx_unauthorized, rx_unknown_apo and serving_refused into `stats`.
   request_server(config cfg, const apo_registry& apos,
-                 reliable_requests& reliable);
+                 reliable_requests& reliable, app_support_stats& stats);
 
   /// First look at a request (`rid` 0: a plain one-way message) from
   /// module `src` for local APO `apo`, signed and verified when
@@ -92,13 +85,6 @@ public:
     return serving_.size();
   }
 
-  const counters& stats() const {
-    return stats_;
-  }
-
-  /// Writes its counters (and sizes) into `s`, under the names
-  /// app_support_stats gives them.
-  void report(app_support_stats& s) const;
 
 
 private:
@@ -121,7 +107,7 @@ private:
   config cfg_;
   const apo_registry& apos_;
   reliable_requests& reliable_;
-  counters stats_;
+  app_support_stats* stats_;
   uint64_t next_ = 1;
   std::map<uint64_t, served> serving_;
 };

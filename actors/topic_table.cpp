@@ -16,8 +16,9 @@ void expire_leases(Map& subs, topic_table::time_point now) {
 
 } // namespace
 
-topic_table::topic_table(size_t max_peers, std::chrono::milliseconds lease)
-  : max_peers_(max_peers), lease_(lease) {
+topic_table::topic_table(size_t max_peers, std::chrono::milliseconds lease,
+                         app_support_stats& stats)
+  : max_peers_(max_peers), lease_(lease), stats_(&stats) {
   // nop
 }
 
@@ -35,7 +36,7 @@ void topic_table::announce(const std::string& name, topic& t, module_id dst,
 void topic_table::send_last(const std::string& name, const topic& t,
                             module_id dst, asl_outbox& out) {
   out.push(dst, asl_publish{name, t.seq, t.last_payload});
-  ++stats_.publications_sent;
+  ++stats_->publications_sent;
 }
 
 // -- this module's publishers and subscribers ---------------------------------
@@ -49,7 +50,7 @@ topic_table::publish(const std::string& name, caf::message msg,
     // Subscribers that are already waiting answer with a subscription.
     out.push(broadcast_module, asl_advertise{name});
   }
-  ++stats_.published;
+  ++stats_->published;
   ++t.seq;
   t.has_last = true;
   t.last = std::move(msg);
@@ -108,7 +109,7 @@ void topic_table::on_subscribe(module_id src, const asl_subscribe& s,
   auto& t = i->second;
   bool fresh = t.remote_subs.count(src) == 0;
   if (fresh && t.remote_subs.size() >= max_peers_) {
-    ++stats_.subscribers_refused;
+    ++stats_->subscribers_refused;
     return;
   }
   t.remote_subs[src] = now + std::min(std::chrono::milliseconds(s.lease_ms),
@@ -131,7 +132,7 @@ void topic_table::on_advertise(module_id src, const asl_advertise& a,
 
 const topic_table::subscribers* topic_table::on_publish(module_id src,
                                                         const asl_publish& p) {
-  ++stats_.publications_received;
+  ++stats_->publications_received;
   auto i = topics_.find(p.topic);
   if (i == topics_.end() || i->second.local_subs.empty())
     return nullptr; // no longer interested; the lease runs out
@@ -141,24 +142,15 @@ const topic_table::subscribers* topic_table::on_publish(module_id src,
     if (p.seq == last->second)
       return nullptr; // the same value again (a late joiner's copy)
     if (p.seq > last->second + 1)
-      stats_.publications_lost += p.seq - last->second - 1;
+      stats_->publications_lost += p.seq - last->second - 1;
     last->second = p.seq;
   } else if (t.last_seq.size() < max_peers_) {
     t.last_seq.emplace(src, p.seq);
   } else {
     // Delivered, but its gaps and repeats go unnoticed.
-    ++stats_.publishers_refused;
+    ++stats_->publishers_refused;
   }
   return &t.local_subs;
-}
-
-void topic_table::report(app_support_stats& s) const {
-  s.published = stats_.published;
-  s.publications_sent = stats_.publications_sent;
-  s.publications_received = stats_.publications_received;
-  s.publications_lost = stats_.publications_lost;
-  s.subscribers_refused = stats_.subscribers_refused;
-  s.publishers_refused = stats_.publishers_refused;
 }
 
 void topic_table::module_lost(module_id m) {

@@ -59,21 +59,13 @@ public:
     std::map<module_id, time_point> remote_subs;
   };
 
-  /// What the class counted (app_support_stats names them the same).
-  struct counters {
-    uint64_t published = 0;
-    uint64_t publications_sent = 0;
-    uint64_t publications_received = 0;
-    uint64_t publications_lost = 0;
-    uint64_t subscribers_refused = 0;
-    uint64_t publishers_refused = 0;
-  };
 
   /// `lease`: how long this module's subscriptions last (renewed at a
-  /// third of it).
-  explicit topic_table(size_t max_peers = SIZE_MAX,
-                       std::chrono::milliseconds lease
-                       = std::chrono::milliseconds{3000});
+  /// third of it). Counts published, publications_sent/received/lost,
+  /// subscribers_refused and publishers_refused into `stats`, which must
+  /// outlive it.
+  topic_table(size_t max_peers, std::chrono::milliseconds lease,
+              app_support_stats& stats);
 
   /// The topic, or nullptr.
   const topic* find(const std::string& name) const;
@@ -127,13 +119,6 @@ public:
   /// Drops leases ended before `now` and renews the subscriptions due.
   void housekeep(time_point now, asl_outbox& out);
 
-  const counters& stats() const {
-    return stats_;
-  }
-
-  /// Writes its counters (and sizes) into `s`, under the names
-  /// app_support_stats gives them.
-  void report(app_support_stats& s) const;
 
 
   size_t size() const {
@@ -149,7 +134,7 @@ private:
 
   size_t max_peers_;
   std::chrono::milliseconds lease_;
-  counters stats_;
+  app_support_stats* stats_;
   std::map<std::string, topic> topics_;
 };
 

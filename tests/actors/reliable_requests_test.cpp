@@ -8,6 +8,7 @@
 #include <chrono>
 #include <vector>
 
+#include "actors/app_support.hpp"
 #include "actors/reliable_requests.hpp"
 
 using namespace herm;
@@ -57,7 +58,8 @@ TEST(reliable_requests, rto_follows_rfc_6298_within_its_bounds) {
   };
   for (auto& r : rows) {
     SCOPED_TRACE(r.what);
-    reliable_requests rr{small_config()};
+    app_support_stats stats;
+    reliable_requests rr{small_config(), stats};
     for (auto x : r.samples_ms)
       rr.sample(a, std::chrono::duration<double, std::milli>(x));
     EXPECT_EQ(rr.rto(a), r.rto);
@@ -86,7 +88,8 @@ TEST(reliable_requests, only_an_answer_to_a_single_copy_is_a_sample) {
   };
   for (auto& r : rows) {
     SCOPED_TRACE(r.what);
-    reliable_requests rr{small_config()};
+    app_support_stats stats;
+    reliable_requests rr{small_config(), stats};
     reliable_requests::transmission tx;
     auto now = t0;
     for (uint32_t i = 0; i < r.copies; ++i) {
@@ -104,7 +107,8 @@ TEST(reliable_requests, only_an_answer_to_a_single_copy_is_a_sample) {
 // -- the copy schedule --------------------------------------------------------------
 
 TEST(reliable_requests, copies_back_off_doubling_up_to_the_maximum_then_stop) {
-  reliable_requests rr{small_config()};
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats};
   reliable_requests::transmission tx;
   // Copy k goes when copy k-1's timeout ran out; its own timeout is:
   std::vector<ms> timeouts{300ms, 600ms, 1200ms, 2000ms, 2000ms, 2000ms};
@@ -116,7 +120,7 @@ TEST(reliable_requests, copies_back_off_doubling_up_to_the_maximum_then_stop) {
     EXPECT_EQ(tx.rto, timeouts[k]);
     EXPECT_EQ(tx.next_send, now + timeouts[k]);
     EXPECT_EQ(tx.first_sent, t0);
-    EXPECT_EQ(rr.stats().retransmissions, k);
+    EXPECT_EQ(stats.retransmissions, k);
     now = tx.next_send;
   }
   // max_transmissions reached: no more copies, looked at every tick until
@@ -127,11 +131,12 @@ TEST(reliable_requests, copies_back_off_doubling_up_to_the_maximum_then_stop) {
     EXPECT_EQ(tx.next_send, now + 100ms);
     now = tx.next_send;
   }
-  EXPECT_EQ(rr.stats().retransmissions, 5u);
+  EXPECT_EQ(stats.retransmissions, 5u);
 }
 
 TEST(reliable_requests, the_first_timeout_comes_from_the_destinations_estimate) {
-  reliable_requests rr{small_config()};
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats};
   rr.sample(a, std::chrono::duration<double, std::milli>(20)); // RTO 60 ms
   reliable_requests::transmission tx;
   ASSERT_TRUE(rr.send(tx, a, t0));
@@ -141,7 +146,8 @@ TEST(reliable_requests, the_first_timeout_comes_from_the_destinations_estimate) 
 }
 
 TEST(reliable_requests, a_new_destination_starts_the_schedule_over) {
-  reliable_requests rr{small_config()};
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats};
   reliable_requests::transmission tx;
   ASSERT_TRUE(rr.send(tx, a, t0));
   ASSERT_TRUE(rr.send(tx, a, t0 + 300ms));
@@ -153,11 +159,12 @@ TEST(reliable_requests, a_new_destination_starts_the_schedule_over) {
   EXPECT_FALSE(tx.acked);
   EXPECT_EQ(tx.first_sent, t0 + 500ms);
   EXPECT_EQ(tx.rto, 300ms);
-  EXPECT_EQ(rr.stats().retransmissions, 1u); // not counted as one
+  EXPECT_EQ(stats.retransmissions, 1u); // not counted as one
 }
 
 TEST(reliable_requests, an_acknowledged_request_is_probed_at_the_slowest_pace) {
-  reliable_requests rr{small_config()};
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats};
   reliable_requests::transmission tx;
   ASSERT_TRUE(rr.send(tx, a, t0));
   rr.acknowledged(tx, t0 + 100ms);
@@ -165,31 +172,33 @@ TEST(reliable_requests, an_acknowledged_request_is_probed_at_the_slowest_pace) {
   EXPECT_EQ(tx.next_send, t0 + 2100ms);
   ASSERT_TRUE(rr.send(tx, a, tx.next_send));
   EXPECT_EQ(tx.rto, 2000ms);
-  EXPECT_EQ(rr.stats().retransmissions, 1u);
+  EXPECT_EQ(stats.retransmissions, 1u);
 }
 
 TEST(reliable_requests, a_request_without_a_target_waits_a_tick_counted_once) {
-  reliable_requests rr{small_config()};
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats};
   reliable_requests::transmission tx, other;
   rr.wait(tx, t0);
   EXPECT_EQ(tx.next_send, t0 + 100ms);
   rr.wait(tx, t0 + 100ms);
   EXPECT_EQ(tx.next_send, t0 + 200ms);
-  EXPECT_EQ(rr.stats().reliable_waited, 1u);
+  EXPECT_EQ(stats.reliable_waited, 1u);
   rr.wait(other, t0);
-  EXPECT_EQ(rr.stats().reliable_waited, 2u);
+  EXPECT_EQ(stats.reliable_waited, 2u);
   // Deferring (a local target not there yet) is not waiting.
   reliable_requests::transmission third;
   rr.defer(third, t0);
   EXPECT_EQ(third.next_send, t0 + 100ms);
-  EXPECT_EQ(rr.stats().reliable_waited, 2u);
+  EXPECT_EQ(stats.reliable_waited, 2u);
   EXPECT_EQ(tx.sends, 0u);
 }
 
 // -- the sender's memory of completed requests --------------------------------------
 
 TEST(reliable_requests, late_answers_are_told_from_unknown_ones_up_to_the_bound) {
-  reliable_requests rr{small_config()}; // remembers 3
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats}; // remembers 3
   for (uint64_t rid : {11, 12, 12, 13, 14})
     rr.complete(rid);
   EXPECT_EQ(rr.completed(), 3u);
@@ -207,14 +216,15 @@ TEST(reliable_requests, late_answers_are_told_from_unknown_ones_up_to_the_bound)
     SCOPED_TRACE(r.rid);
     EXPECT_EQ(rr.late(r.rid), r.late);
     expected_late += r.late ? 1 : 0;
-    EXPECT_EQ(rr.stats().late_duplicates, expected_late);
+    EXPECT_EQ(stats.late_duplicates, expected_late);
   }
 }
 
 // -- the receiver's duplicate cache -------------------------------------------------
 
 TEST(reliable_requests, a_copy_of_a_remembered_request_is_a_suppressed_duplicate) {
-  reliable_requests rr{small_config()};
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats};
   EXPECT_EQ(rr.duplicate(a, 7), nullptr);
   auto& c = rr.remember(a, 7, false, false, t0);
   c.sign = true;
@@ -234,7 +244,7 @@ TEST(reliable_requests, a_copy_of_a_remembered_request_is_a_suppressed_duplicate
   EXPECT_EQ(d->response, r);
   // The same id from another module is another request.
   EXPECT_EQ(rr.duplicate(b, 7), nullptr);
-  EXPECT_EQ(rr.stats().duplicates_suppressed, 2u);
+  EXPECT_EQ(stats.duplicates_suppressed, 2u);
   // A response for an entry not (or no longer) cached changes nothing.
   rr.respond(b, 8, r);
   EXPECT_EQ(rr.duplicate(b, 8), nullptr);
@@ -242,7 +252,8 @@ TEST(reliable_requests, a_copy_of_a_remembered_request_is_a_suppressed_duplicate
 }
 
 TEST(reliable_requests, one_way_messages_are_cached_done) {
-  reliable_requests rr{small_config()};
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats};
   rr.remember(a, 5, true, true, t0);
   auto d = rr.duplicate(a, 5);
   ASSERT_NE(d, nullptr);
@@ -251,7 +262,8 @@ TEST(reliable_requests, one_way_messages_are_cached_done) {
 }
 
 TEST(reliable_requests, the_cache_holds_at_most_its_size_dropping_the_oldest) {
-  reliable_requests rr{small_config()}; // 3 entries
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats}; // 3 entries
   for (uint64_t rid = 1; rid <= 5; ++rid)
     rr.remember(a, rid, true, true, t0 + ms(rid));
   EXPECT_EQ(rr.cached(), 3u);
@@ -265,12 +277,13 @@ TEST(reliable_requests, the_cache_holds_at_most_its_size_dropping_the_oldest) {
     SCOPED_TRACE(r.rid);
     EXPECT_EQ(rr.duplicate(a, r.rid) != nullptr, r.cached);
     suppressed += r.cached ? 1 : 0;
-    EXPECT_EQ(rr.stats().duplicates_suppressed, suppressed);
+    EXPECT_EQ(stats.duplicates_suppressed, suppressed);
   }
 }
 
 TEST(reliable_requests, cache_entries_expire_after_their_lifetime) {
-  reliable_requests rr{small_config()}; // ttl 15 s
+  app_support_stats stats;
+  reliable_requests rr{small_config(), stats}; // ttl 15 s
   rr.remember(a, 1, true, true, t0);
   rr.remember(a, 2, true, true, t0 + 1s);
   struct row {
@@ -288,7 +301,7 @@ TEST(reliable_requests, cache_entries_expire_after_their_lifetime) {
     EXPECT_EQ(rr.cached(), r.cached);
   }
   EXPECT_EQ(rr.duplicate(a, 1), nullptr);
-  EXPECT_EQ(rr.stats().duplicates_suppressed, 0u);
+  EXPECT_EQ(stats.duplicates_suppressed, 0u);
 }
 
 } // namespace
