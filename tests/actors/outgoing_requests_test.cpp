@@ -1,0 +1,145 @@
+// The sender's table of requests waiting for an answer
+// (actors/outgoing_requests.hpp), time passed in: ids, the bound, which
+// answer matches which request, and what leaves the table when.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <set>
+#include <vector>
+
+#include "actors/outgoing_requests.hpp"
+
+using namespace herm;
+using namespace std::chrono_literals;
+
+namespace {
+
+using time_point = outgoing_requests::time_point;
+
+const time_point t0{};
+
+constexpr module_id a = 0x21;
+constexpr module_id b = 0x22;
+
+outgoing request(uint32_t binding, module_id dst, time_point deadline,
+                 bool reliable = false, uint32_t sends = 1) {
+  outgoing out;
+  out.binding = binding;
+  out.deadline = deadline;
+  out.reliable = reliable;
+  out.tx.dst = dst;
+  out.tx.sends = sends;
+  return out;
+}
+
+std::vector<uint32_t> bindings_of(const std::vector<outgoing>& xs) {
+  std::vector<uint32_t> result;
+  for (auto& x : xs)
+    result.push_back(x.binding);
+  std::sort(result.begin(), result.end());
+  return result;
+}
+
+TEST(outgoing_requests, ids_are_distinct_not_sequential_and_the_table_is_bounded) {
+  outgoing_requests reqs{42, 3};
+  std::vector<uint64_t> ids;
+  for (uint32_t i = 1; i <= 3; ++i) {
+    EXPECT_FALSE(reqs.full());
+    ids.push_back(reqs.add(request(i, a, t0 + 1s)).first);
+  }
+  EXPECT_TRUE(reqs.full());
+  EXPECT_EQ(reqs.size(), 3u);
+  EXPECT_EQ(std::set<uint64_t>(ids.begin(), ids.end()).size(), 3u);
+  for (auto id : ids)
+    EXPECT_NE(id, 0u);
+  EXPECT_NE(ids[1], ids[0] + 1);
+  // Another key, other ids.
+  outgoing_requests other{43, 3};
+  EXPECT_NE(other.add(request(1, a, t0)).first, ids[0]);
+}
+
+TEST(outgoing_requests, an_answer_matches_only_the_request_it_can_be_for) {
+  struct row {
+    const char* what;
+    bool reliable;
+    uint32_t sends;
+    module_id from;
+    bool ack;
+    bool matches;
+  };
+  std::vector<row> rows{
+    {"a response from where a plain request went", false, 1, a, false, true},
+    {"a response from another module", false, 1, b, false, false},
+    {"an ack for a plain request", false, 1, a, true, false},
+    {"a response to a reliable request", true, 1, a, false, true},
+    {"an ack for a reliable request", true, 3, a, true, true},
+    {"an ack from another module", true, 1, b, true, false},
+    {"an answer to a reliable request not sent yet", true, 0, a, false,
+     false},
+    {"an ack for a reliable request not sent yet", true, 0, a, true, false},
+  };
+  for (auto& r : rows) {
+    SCOPED_TRACE(r.what);
+    outgoing_requests reqs{1, 10};
+    auto rid = reqs.add(request(7, a, t0, r.reliable, r.sends)).first;
+    EXPECT_EQ(reqs.expecting(rid, r.from, r.ack) != nullptr, r.matches);
+    EXPECT_EQ(reqs.expecting(rid + 1, r.from, r.ack), nullptr);
+  }
+}
+
+TEST(outgoing_requests, requests_leave_by_binding_module_deadline_or_all_at_once) {
+  outgoing_requests reqs{1, 10};
+  reqs.add(request(1, a, t0 + 1s));
+  reqs.add(request(2, a, t0 + 2s, true));
+  reqs.add(request(3, b, t0 + 3s));
+  reqs.add(request(4, b, t0 + 4s, true));
+  reqs.add(request(5, a, t0 + 5s));
+  // Binding 2, keeping reliable ones: none goes.
+  EXPECT_TRUE(reqs.take_waiting_on(2, no_module, true).empty());
+  // Module a, keeping reliable ones: 1 and 5.
+  EXPECT_EQ(bindings_of(reqs.take_waiting_on(0, a, true)),
+            (std::vector<uint32_t>{1, 5}));
+  // Deadlines passed at 3 s: 2 and 3 (a deadline at `now` has passed).
+  EXPECT_EQ(bindings_of(reqs.take_expired(t0 + 3s)),
+            (std::vector<uint32_t>{2, 3}));
+  EXPECT_EQ(bindings_of(reqs.take_all()), (std::vector<uint32_t>{4}));
+  EXPECT_EQ(reqs.size(), 0u);
+}
+
+TEST(outgoing_requests, due_lists_reliable_requests_whose_time_came_or_that_are_forced) {
+  outgoing_requests reqs{1, 10};
+  auto plain = reqs.add(request(1, a, t0 + 9s)).first;
+  auto later = reqs.add(request(2, a, t0 + 9s, true)).first;
+  auto now_due = reqs.add(request(3, a, t0 + 9s, true)).first;
+  auto acked = reqs.add(request(2, a, t0 + 9s, true)).first;
+  reqs.find(later)->tx.next_send = t0 + 2s;
+  reqs.find(now_due)->tx.next_send = t0 + 1s;
+  reqs.find(acked)->tx.next_send = t0 + 5s;
+  reqs.find(acked)->tx.acked = true;
+  auto sorted = [](std::vector<uint64_t> xs) {
+    std::sort(xs.begin(), xs.end());
+    return xs;
+  };
+  struct row {
+    const char* what;
+    std::vector<uint32_t> forced;
+    bool unacked_only;
+    std::vector<uint64_t> due;
+  };
+  std::vector<row> rows{
+    {"only the one whose time came", {}, false, {now_due}},
+    {"binding 2 forced: both of its", {2}, false, {later, now_due, acked}},
+    {"binding 2 forced, acked ones spared", {2}, true, {later, now_due}},
+    {"a plain request's binding forced: never", {1}, false, {now_due}},
+  };
+  for (auto& r : rows) {
+    SCOPED_TRACE(r.what);
+    EXPECT_EQ(sorted(reqs.due(t0 + 1s, r.forced, r.unacked_only)),
+              sorted(r.due));
+  }
+  EXPECT_NE(reqs.find(plain), nullptr);
+}
+
+} // namespace
