@@ -1,9 +1,7 @@
 #include "actors/app_support.hpp"
 
-#include <algorithm>
-#include <map>
 #include <random>
-#include <set>
+#include <variant>
 
 #include "caf/actor_system.hpp"
 #include "caf/mailbox_element.hpp"
