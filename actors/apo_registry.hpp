@@ -34,7 +34,6 @@ class apo_registry {
 public:
   using time_point = app_table::time_point;
 
-
   /// `key` seeds the APO numbers (app_table). Counts registered,
   /// withdrawn and watches_refused into `stats`, which must outlive it.
   apo_registry(uint64_t key, size_t max_watches, app_support_stats& stats);
@@ -79,8 +78,6 @@ public:
   void on_unwatch(module_id src, const asl_unwatch& w) {
     table_.unwatch(w.apo, src);
   }
-
-
 
   /// The application table for people: the local APOs (as module `self`'s,
   /// with their watcher counts), then the remote ones with their age at

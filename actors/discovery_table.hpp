@@ -35,7 +35,6 @@ public:
   /// Called once with the matches when a discovery ends.
   using callback = std::function<void(std::vector<apo_ref>)>;
 
-
   /// Query ids come from a scrambled_sequence keyed with `key` (one id
   /// seen gives away no other). Counts queries_sent, queries_answered,
   /// answers_received, remote_apos_refused and discovery_entries_refused
@@ -74,8 +73,6 @@ public:
 
   /// The ids of every discovery running, in id order.
   std::vector<uint32_t> running() const;
-
-
 
 private:
   struct discovery {

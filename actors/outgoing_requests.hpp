@@ -103,10 +103,6 @@ public:
     return i != requests_.end() ? &i->second : nullptr;
   }
 
-  std::map<uint64_t, outgoing>& all() {
-    return requests_;
-  }
-
 private:
   template <class Pred>
   std::vector<outgoing> take_if(Pred pred);

@@ -42,7 +42,6 @@ public:
     bool allow_unsigned_remote = false;
   };
 
-
   /// Counts requests_served, oneway_delivered, acks_sent,
   /// rx_unauthorized, rx_unknown_apo and serving_refused into `stats`.
   request_server(config cfg, const apo_registry& apos,
@@ -84,8 +83,6 @@ public:
   size_t serving() const {
     return serving_.size();
   }
-
-
 
 private:
   /// A request a remote module made of one of our APOs.

@@ -59,7 +59,6 @@ public:
     std::map<module_id, time_point> remote_subs;
   };
 
-
   /// `lease`: how long this module's subscriptions last (renewed at a
   /// third of it). Counts published, publications_sent/received/lost,
   /// subscribers_refused and publishers_refused into `stats`, which must
@@ -118,12 +117,6 @@ public:
 
   /// Drops leases ended before `now` and renews the subscriptions due.
   void housekeep(time_point now, asl_outbox& out);
-
-
-
-  size_t size() const {
-    return topics_.size();
-  }
 
 private:
   void announce(const std::string& name, topic& t, module_id dst,
