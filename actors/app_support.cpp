@@ -39,7 +39,7 @@ struct asl_state {
                                                    "stopped");
     for (auto& p : bindings.take_proxies())
       detail::kill_apo_proxy(p, reason, nullptr);
-    for (auto& req : pending->take_all())
+    for (auto& req : pending ? pending->take_all() : std::vector<outgoing>{})
       if (req.sender)
         req.sender->enqueue(nullptr, req.mid.response_id(),
                             caf::make_message(reason), nullptr);
@@ -50,7 +50,10 @@ struct asl_state {
   module_id self_id = no_module;
   /// Counters; the cores count into it too (so it outlives them).
   app_support_stats stats;
+  /// The cores; later ones hold references to earlier ones.
   std::unique_ptr<apo_registry> apos;
+  /// Reliable mode: round trips, copy schedules, the duplicate cache.
+  std::unique_ptr<reliable_requests> reliable;
   binding_table bindings;
   std::unique_ptr<outgoing_requests> pending;
   std::unique_ptr<request_server> server;
@@ -63,8 +66,6 @@ struct asl_state {
   asl_outbox out;
   reach_table reach;
   caf::strong_actor_ptr sink;
-  /// Reliable mode: round trips, copy schedules, the duplicate cache.
-  std::unique_ptr<reliable_requests> reliable;
   uint32_t ticks = 0;
   byte_buffer buf;
 };
