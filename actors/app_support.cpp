@@ -359,19 +359,9 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
   }
 }
 
-/// The request an answer (a response, or with `ack` an ack) from `src` is
-/// for; nullptr, counted as a late duplicate or unexpected, if none waits.
-outgoing* waiting_for(asl_impl self, uint64_t rid, module_id src, bool ack) {
-  auto& st = self->state;
-  auto out = st.pending->expecting(rid, src, ack);
-  if (out == nullptr && !st.reliable->late(rid))
-    ++st.stats.rx_unexpected_response;
-  return out;
-}
-
 void on_response(asl_impl self, module_id src, asl_response& r) {
   auto& st = self->state;
-  auto waiting = waiting_for(self, r.request_id, src, false);
+  auto waiting = st.pending->expecting(r.request_id, src, false);
   if (waiting == nullptr)
     return;
   if (waiting->reliable) {
@@ -413,22 +403,6 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
   } else {
     reply(caf::make_message(msg.error()));
   }
-}
-
-void on_ack(asl_impl self, module_id src, const asl_ack& a) {
-  auto& st = self->state;
-  auto out = waiting_for(self, a.request_id, src, true);
-  if (out == nullptr)
-    return;
-  ++st.stats.acks_received;
-  if (out->oneway) {
-    st.reliable->answered(out->tx, self->clock().now());
-    st.reliable->complete(a.request_id);
-    st.pending->erase(a.request_id);
-    return;
-  }
-  // Being served: probe at the slowest pace until the response comes.
-  st.reliable->acknowledged(out->tx, self->clock().now());
 }
 
 // -- requests: the receiver ----------------------------------------------------------
@@ -550,7 +524,7 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
         on_request(self, src, x.request_id, x.apo, x.oneway, x.payload,
                    pkt.authenticated, true);
       } else if constexpr (std::is_same_v<T, asl_ack>) {
-        on_ack(self, src, x);
+        st.pending->on_ack(src, x, now);
       } else if constexpr (std::is_same_v<T, asl_watch>) {
         st.apos->on_watch(src, x, st.self_id, st.out);
       } else if constexpr (std::is_same_v<T, asl_unwatch>) {
@@ -732,16 +706,16 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
                                              init.stats);
   init.discoveries = std::make_unique<discovery_table>(
     random_key(), cfg.max_remote_apos, init.apos->table(), init.stats);
-  init.pending
-    = std::make_unique<outgoing_requests>(random_key(), cfg.max_pending);
-  init.topics = std::make_unique<topic_table>(
-    cfg.max_topic_peers, cfg.subscription_lease, init.stats);
   init.reliable = std::make_unique<reliable_requests>(
     reliable_requests::config{cfg.tick, cfg.retransmit_initial,
                               cfg.retransmit_min, cfg.retransmit_max,
                               cfg.max_transmissions, cfg.reliable_cache,
                               cfg.reliable_cache_ttl},
     init.stats);
+  init.pending = std::make_unique<outgoing_requests>(
+    random_key(), cfg.max_pending, *init.reliable, init.stats);
+  init.topics = std::make_unique<topic_table>(
+    cfg.max_topic_peers, cfg.subscription_lease, init.stats);
   init.server = std::make_unique<request_server>(
     request_server::config{cfg.max_pending, cfg.request_timeout,
                            cfg.allow_unsigned_remote},

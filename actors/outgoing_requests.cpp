@@ -2,10 +2,14 @@
 
 #include <algorithm>
 
+#include "actors/app_support.hpp"
+
 namespace herm {
 
-outgoing_requests::outgoing_requests(uint64_t key, size_t max_pending)
-  : ids_(key), max_(max_pending) {
+outgoing_requests::outgoing_requests(uint64_t key, size_t max_pending,
+                                     reliable_requests& reliable,
+                                     app_support_stats& stats)
+  : ids_(key), max_(max_pending), reliable_(reliable), stats_(&stats) {
   // nop
 }
 
@@ -16,13 +20,31 @@ std::pair<uint64_t, outgoing&> outgoing_requests::add(outgoing out) {
 
 outgoing* outgoing_requests::expecting(uint64_t rid, module_id src, bool ack) {
   auto i = requests_.find(rid);
-  if (i == requests_.end())
-    return nullptr;
-  auto& out = i->second;
-  if (out.tx.dst != src || (out.reliable && out.tx.sends == 0)
-      || (ack && !out.reliable))
-    return nullptr;
-  return &out;
+  if (i != requests_.end()) {
+    auto& out = i->second;
+    if (out.tx.dst == src && !(out.reliable && out.tx.sends == 0)
+        && !(ack && !out.reliable))
+      return &out;
+  }
+  if (!reliable_.late(rid))
+    ++stats_->rx_unexpected_response;
+  return nullptr;
+}
+
+void outgoing_requests::on_ack(module_id src, const asl_ack& a,
+                               time_point now) {
+  auto out = expecting(a.request_id, src, true);
+  if (out == nullptr)
+    return;
+  ++stats_->acks_received;
+  if (out->oneway) {
+    reliable_.answered(out->tx, now);
+    reliable_.complete(a.request_id);
+    requests_.erase(a.request_id);
+    return;
+  }
+  // Being served: probe at the slowest pace until the response comes.
+  reliable_.acknowledged(out->tx, now);
 }
 
 outgoing outgoing_requests::take(uint64_t rid) {

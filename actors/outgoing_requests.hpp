@@ -7,9 +7,10 @@
 //
 // No clock and no I/O: time comes in as arguments, and the caller answers
 // the requesters with what it takes out. Requesters' handles and messages
-// are held as plain values, never used. Not thread-safe (one actor owns
-// it). At most `max_pending` requests (add refuses more); lookups O(log n),
-// the take_* scans O(n).
+// are held as plain values, never used. Holds references to the module's
+// reliable_requests and app_support_stats, which must outlive it. Not
+// thread-safe (one actor owns it). At most `max_pending` requests (add
+// refuses more); lookups O(log n), the take_* scans and due O(n).
 
 #include <chrono>
 #include <cstdint>
@@ -25,6 +26,8 @@
 #include "actors/reliable_requests.hpp"
 
 namespace herm {
+
+struct app_support_stats;
 
 /// A request sent to a remote APO, waiting for its response.
 struct outgoing {
@@ -51,7 +54,9 @@ public:
   /// Request ids come from a scrambled_sequence keyed with `key`: they go
   /// on the wire, and a forged response should need more than one packet
   /// sniffed.
-  outgoing_requests(uint64_t key, size_t max_pending);
+  /// Counts rx_unexpected_response and acks_received into `stats`.
+  outgoing_requests(uint64_t key, size_t max_pending,
+                    reliable_requests& reliable, app_support_stats& stats);
 
   bool full() const {
     return requests_.size() >= max_;
@@ -67,8 +72,14 @@ public:
   /// The request a response (or, with `ack`, an ack) from module `src`
   /// answers: nullptr if `rid` does not wait for one from there (unknown,
   /// another module's, a reliable one with no copy out yet; for an ack,
-  /// a plain one).
+  /// a plain one), counted as a late duplicate (reliable_requests::late)
+  /// or else as unexpected.
   outgoing* expecting(uint64_t rid, module_id src, bool ack);
+
+  /// An ack from module `src` at `now`: a one-way message is done (and
+  /// leaves), a request is being served (probed at the slowest pace from
+  /// now on). Strays are counted as by expecting.
+  void on_ack(module_id src, const asl_ack& a, time_point now);
 
   void erase(uint64_t rid) {
     requests_.erase(rid);
@@ -109,6 +120,8 @@ private:
 
   scrambled_sequence<uint64_t> ids_;
   size_t max_;
+  reliable_requests& reliable_;
+  app_support_stats* stats_;
   std::map<uint64_t, outgoing> requests_;
 };
 

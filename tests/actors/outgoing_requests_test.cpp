@@ -9,6 +9,7 @@
 #include <set>
 #include <vector>
 
+#include "actors/app_support.hpp"
 #include "actors/outgoing_requests.hpp"
 
 using namespace herm;
@@ -34,6 +35,12 @@ outgoing request(uint32_t binding, module_id dst, time_point deadline,
   return out;
 }
 
+/// What the table works with: the reliable machine and the counters.
+struct env {
+  app_support_stats stats;
+  reliable_requests rr{reliable_requests::config{}, stats};
+};
+
 std::vector<uint32_t> bindings_of(const std::vector<outgoing>& xs) {
   std::vector<uint32_t> result;
   for (auto& x : xs)
@@ -43,7 +50,8 @@ std::vector<uint32_t> bindings_of(const std::vector<outgoing>& xs) {
 }
 
 TEST(outgoing_requests, ids_are_distinct_not_sequential_and_the_table_is_bounded) {
-  outgoing_requests reqs{42, 3};
+  env e;
+  outgoing_requests reqs{42, 3, e.rr, e.stats};
   std::vector<uint64_t> ids;
   for (uint32_t i = 1; i <= 3; ++i) {
     EXPECT_FALSE(reqs.full());
@@ -56,7 +64,7 @@ TEST(outgoing_requests, ids_are_distinct_not_sequential_and_the_table_is_bounded
     EXPECT_NE(id, 0u);
   EXPECT_NE(ids[1], ids[0] + 1);
   // Another key, other ids.
-  outgoing_requests other{43, 3};
+  outgoing_requests other{43, 3, e.rr, e.stats};
   EXPECT_NE(other.add(request(1, a, t0)).first, ids[0]);
 }
 
@@ -82,15 +90,18 @@ TEST(outgoing_requests, an_answer_matches_only_the_request_it_can_be_for) {
   };
   for (auto& r : rows) {
     SCOPED_TRACE(r.what);
-    outgoing_requests reqs{1, 10};
+    env e;
+    outgoing_requests reqs{1, 10, e.rr, e.stats};
     auto rid = reqs.add(request(7, a, t0, r.reliable, r.sends)).first;
     EXPECT_EQ(reqs.expecting(rid, r.from, r.ack) != nullptr, r.matches);
     EXPECT_EQ(reqs.expecting(rid + 1, r.from, r.ack), nullptr);
+    EXPECT_EQ(e.stats.rx_unexpected_response, r.matches ? 1u : 2u);
   }
 }
 
 TEST(outgoing_requests, requests_leave_by_binding_module_deadline_or_all_at_once) {
-  outgoing_requests reqs{1, 10};
+  env e;
+  outgoing_requests reqs{1, 10, e.rr, e.stats};
   reqs.add(request(1, a, t0 + 1s));
   reqs.add(request(2, a, t0 + 2s, true));
   reqs.add(request(3, b, t0 + 3s));
@@ -109,7 +120,8 @@ TEST(outgoing_requests, requests_leave_by_binding_module_deadline_or_all_at_once
 }
 
 TEST(outgoing_requests, due_lists_reliable_requests_whose_time_came_or_that_are_forced) {
-  outgoing_requests reqs{1, 10};
+  env e;
+  outgoing_requests reqs{1, 10, e.rr, e.stats};
   auto plain = reqs.add(request(1, a, t0 + 9s)).first;
   auto later = reqs.add(request(2, a, t0 + 9s, true)).first;
   auto now_due = reqs.add(request(3, a, t0 + 9s, true)).first;
@@ -140,6 +152,30 @@ TEST(outgoing_requests, due_lists_reliable_requests_whose_time_came_or_that_are_
               sorted(r.due));
   }
   EXPECT_NE(reqs.find(plain), nullptr);
+}
+
+TEST(outgoing_requests, an_ack_ends_a_one_way_message_and_slows_a_requests_probes) {
+  env e;
+  outgoing_requests reqs{1, 10, e.rr, e.stats};
+  auto oneway = reqs.add(request(1, a, t0 + 9s, true)).first;
+  reqs.find(oneway)->oneway = true;
+  reqs.find(oneway)->tx.first_sent = t0;
+  auto served = reqs.add(request(2, a, t0 + 9s, true)).first;
+  reqs.on_ack(a, asl_ack{oneway}, t0 + 40ms);
+  EXPECT_EQ(reqs.find(oneway), nullptr);
+  ASSERT_NE(e.rr.estimate(a), nullptr); // answered on its first copy
+  EXPECT_DOUBLE_EQ(e.rr.estimate(a)->srtt, 40);
+  reqs.on_ack(a, asl_ack{served}, t0 + 50ms);
+  ASSERT_NE(reqs.find(served), nullptr);
+  EXPECT_TRUE(reqs.find(served)->tx.acked);
+  EXPECT_EQ(reqs.find(served)->tx.next_send, t0 + 50ms + 2s);
+  EXPECT_EQ(e.stats.acks_received, 2u);
+  // A copy of the first ack is late; an ack nobody asked for, unexpected.
+  reqs.on_ack(a, asl_ack{oneway}, t0 + 60ms);
+  reqs.on_ack(a, asl_ack{oneway + served}, t0 + 60ms);
+  EXPECT_EQ(e.stats.late_duplicates, 1u);
+  EXPECT_EQ(e.stats.rx_unexpected_response, 1u);
+  EXPECT_EQ(e.stats.acks_received, 2u);
 }
 
 } // namespace
