@@ -361,32 +361,12 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
 
 void on_response(asl_impl self, module_id src, asl_response& r) {
   auto& st = self->state;
-  auto waiting = st.pending->expecting(r.request_id, src, false);
-  if (waiting == nullptr)
+  auto step = st.pending->on_response(src, r, self->clock().now(), st.bindings);
+  if (step.kind == outgoing_requests::response_step::rebind)
+    lose_target(self, step.binding, step.error, step.error);
+  if (step.kind != outgoing_requests::response_step::reply)
     return;
-  if (waiting->reliable) {
-    auto& out = *waiting;
-    st.reliable->answered(out.tx, self->clock().now());
-    if (!r.ok && !out.oneway) {
-      // The APO is not there (any more): a rebinding proxy's request waits
-      // for the next target instead of failing.
-      auto err = from_wire(r.error);
-      auto b = st.bindings.find(out.binding);
-      if (is(err, app_ec::apo_gone) && b != nullptr && b->rebind) {
-        out.tx.sends = 0;
-        lose_target(self, out.binding, err, err);
-        return;
-      }
-    }
-    st.reliable->complete(r.request_id);
-    if (out.oneway) {
-      // An error for a one-way message: nobody to tell.
-      st.pending->erase(r.request_id);
-      return;
-    }
-  }
-  auto out = st.pending->take(r.request_id);
-  ++st.stats.responses_received;
+  auto& out = step.out;
   caf::strong_actor_ptr from;
   if (auto b = st.bindings.find(out.binding))
     from = b->proxy.lock();

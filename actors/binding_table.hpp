@@ -57,6 +57,10 @@ public:
   /// The binding, or nullptr.
   binding* find(uint32_t id);
 
+  const binding* find(uint32_t id) const {
+    return const_cast<binding_table*>(this)->find(id);
+  }
+
   /// Points `b` at `ref` at `now` and watches it (if it is not on module
   /// `self`).
   static void bind(binding& b, const apo_ref& ref, module_id self,

@@ -3,6 +3,8 @@
 #include <algorithm>
 
 #include "actors/app_support.hpp"
+#include "actors/asl_errors.hpp"
+#include "actors/runtime/error.hpp"
 
 namespace herm {
 
@@ -29,6 +31,41 @@ outgoing* outgoing_requests::expecting(uint64_t rid, module_id src, bool ack) {
   if (!reliable_.late(rid))
     ++stats_->rx_unexpected_response;
   return nullptr;
+}
+
+outgoing_requests::response_step
+outgoing_requests::on_response(module_id src, const asl_response& r,
+                               time_point now,
+                               const binding_table& bindings) {
+  response_step step;
+  auto out = expecting(r.request_id, src, false);
+  if (out == nullptr)
+    return step;
+  if (out->reliable) {
+    reliable_.answered(out->tx, now);
+    if (!r.ok && !out->oneway) {
+      // The APO is not there (any more): a rebinding proxy's request waits
+      // for the next target instead of failing.
+      auto err = from_wire(r.error);
+      auto b = bindings.find(out->binding);
+      if (is(err, app_ec::apo_gone) && b != nullptr && b->rebind) {
+        out->tx.sends = 0;
+        step.kind = response_step::rebind;
+        step.binding = out->binding;
+        step.error = std::move(err);
+        return step;
+      }
+    }
+    reliable_.complete(r.request_id);
+    if (out->oneway) {
+      requests_.erase(r.request_id);
+      return step;
+    }
+  }
+  ++stats_->responses_received;
+  step.kind = response_step::reply;
+  step.out = take(r.request_id);
+  return step;
 }
 
 void outgoing_requests::on_ack(module_id src, const asl_ack& a,

@@ -23,6 +23,7 @@
 #include "caf/message_id.hpp"
 
 #include "actors/app_table.hpp"
+#include "actors/binding_table.hpp"
 #include "actors/reliable_requests.hpp"
 
 namespace herm {
@@ -75,6 +76,26 @@ public:
   /// a plain one), counted as a late duplicate (reliable_requests::late)
   /// or else as unexpected.
   outgoing* expecting(uint64_t rid, module_id src, bool ack);
+
+  /// What a response asks of the caller.
+  struct response_step {
+    enum kind_t { none, rebind, reply };
+    /// none: nothing (a stray, counted as by expecting; or an error for a
+    /// one-way message: nobody to tell).
+    kind_t kind = none;
+    /// rebind: the APO of `binding`, a rebinding one, is gone (`error`):
+    /// its reliable request stays, to go to the next target.
+    uint32_t binding = 0;
+    caf::error error;
+    /// reply: the request, taken out (counted in responses_received): its
+    /// sender gets the response.
+    outgoing out;
+  };
+
+  /// A response from module `src` at `now` (a reliable request's round
+  /// trip is sampled, and it is remembered as completed).
+  response_step on_response(module_id src, const asl_response& r,
+                            time_point now, const binding_table& bindings);
 
   /// An ack from module `src` at `now`: a one-way message is done (and
   /// leaves), a request is being served (probed at the slowest pace from

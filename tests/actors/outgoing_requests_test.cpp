@@ -10,7 +10,9 @@
 #include <vector>
 
 #include "actors/app_support.hpp"
+#include "actors/asl_errors.hpp"
 #include "actors/outgoing_requests.hpp"
+#include "actors/runtime/error.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
@@ -176,6 +178,74 @@ TEST(outgoing_requests, an_ack_ends_a_one_way_message_and_slows_a_requests_probe
   EXPECT_EQ(e.stats.late_duplicates, 1u);
   EXPECT_EQ(e.stats.rx_unexpected_response, 1u);
   EXPECT_EQ(e.stats.acks_received, 2u);
+}
+
+TEST(outgoing_requests, a_response_replies_waits_for_a_rebinding_target_or_ends_quietly) {
+  using step = outgoing_requests::response_step;
+  auto gone = [](uint64_t rid) {
+    asl_response r;
+    r.request_id = rid;
+    r.ok = false;
+    r.error = to_wire(make_error(app_ec::apo_gone, "gone"));
+    return r;
+  };
+  auto fine = [](uint64_t rid) {
+    asl_response r;
+    r.request_id = rid;
+    return r;
+  };
+  struct row {
+    const char* what;
+    bool reliable;
+    bool oneway;
+    bool rebind;
+    bool ok;
+    step::kind_t kind;
+    bool stays;
+  };
+  std::vector<row> rows{
+    {"a plain request's response", false, false, false, true, step::reply,
+     false},
+    {"a plain request's error, even on a rebinding binding", false, false,
+     true, false, step::reply, false},
+    {"a reliable request's response", true, false, false, true, step::reply,
+     false},
+    {"apo_gone for a rebinding binding's reliable request", true, false, true,
+     false, step::rebind, true},
+    {"apo_gone for a reliable request of a plain binding", true, false, false,
+     false, step::reply, false},
+    {"an error for a reliable one-way message", true, true, true, false,
+     step::none, false},
+  };
+  for (auto& r : rows) {
+    SCOPED_TRACE(r.what);
+    env e;
+    binding_table bindings;
+    asl_outbox out;
+    auto [id, binding] = bindings.add(t0);
+    binding.rebind = r.rebind;
+    outgoing_requests reqs{1, 10, e.rr, e.stats};
+    auto rid = reqs.add(request(id, a, t0 + 9s, r.reliable)).first;
+    reqs.find(rid)->oneway = r.oneway;
+    auto result = reqs.on_response(a, r.ok ? fine(rid) : gone(rid), t0 + 30ms,
+                                   bindings);
+    EXPECT_EQ(result.kind, r.kind);
+    EXPECT_EQ(reqs.find(rid) != nullptr, r.stays);
+    EXPECT_EQ(e.stats.responses_received, r.kind == step::reply ? 1u : 0u);
+    if (r.kind == step::rebind) {
+      EXPECT_EQ(result.binding, id);
+      EXPECT_TRUE(is(result.error, app_ec::apo_gone));
+      EXPECT_EQ(reqs.find(rid)->tx.sends, 0u); // sent again when rebound
+    }
+    if (r.kind == step::reply) {
+      EXPECT_EQ(result.out.binding, id);
+    }
+    // Reliable ones that ended are remembered: a copy of the answer is late.
+    if (r.reliable && !r.stays) {
+      reqs.on_response(a, fine(rid), t0 + 40ms, bindings);
+      EXPECT_EQ(e.stats.late_duplicates, 1u);
+    }
+  }
 }
 
 } // namespace
