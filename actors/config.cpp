@@ -304,7 +304,7 @@ public:
   void limits(const field& f, routing_config& r) const {
     auto fs = entries(f.value, f.path, f.key_line, "a map",
                       {"destinations", "destinations_per_neighbour", "routes",
-                       "neighbours", "neighbours_per_channel"});
+                       "neighbours", "neighbours_per_channel", "floods"});
     auto get = [&](const char* key, uint64_t max, size_t& out) {
       if (auto* x = find(fs, f.path + "." + key))
         out = static_cast<size_t>(integer(*x, 1, max));
@@ -314,6 +314,7 @@ public:
     get("routes", 1048576, r.limits.routes);
     get("neighbours", 65536, r.max_neighbours);
     get("neighbours_per_channel", 65536, r.max_neighbours_per_channel);
+    get("floods", 1048576, r.max_floods);
   }
 
   static constexpr const char* name_rule

@@ -668,7 +668,7 @@ void init(agent_impl self, io_manager_actor io, routing_config cfg) {
   st.neighbours = neighbour_table{{st.cfg.max_neighbours,
                                    st.cfg.max_neighbours_per_channel,
                                    st.cfg.hello_interval, st.cfg.hello_loss}};
-  st.floods = flood_cache{std::min(st.cfg.max_floods, st.cfg.max_flood_ids)};
+  st.floods = flood_cache{st.cfg.max_floods};
   st.requested = seqno_requests{{st.cfg.hello_interval,
                                  st.cfg.max_seqno_requests}};
   uint64_t instance = st.cfg.instance;

@@ -353,13 +353,11 @@ struct routing_config {
   /// requests, are remembered for half a hello interval).
   std::chrono::milliseconds flood_memory{30000};
   /// The one bound of the flood cache (routing/flood_cache.hpp), which
-  /// remembers both: it holds at most min(max_floods, max_flood_ids)
-  /// entries, the soonest to expire forgotten first when full (counted in
-  /// routing_stats::floods_evicted or flood_ids_evicted by what was
-  /// forgotten). Set max_floods; max_flood_ids, the broadcasts' own bound
-  /// before they shared one cache, still lowers it where it is set.
+  /// remembers flooded control packets and broadcasts alike: at most this
+  /// many entries, the soonest to expire forgotten first when full (counted
+  /// in routing_stats::floods_evicted or flood_ids_evicted by what was
+  /// forgotten). Config: module.limits.floods.
   size_t max_floods = 8192;
-  size_t max_flood_ids = 8192;
   /// Bounds on the route table (see route_limits).
   route_limits limits;
   /// Neighbours at most, in total and per channel. A fake peer on a

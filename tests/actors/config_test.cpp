@@ -1079,17 +1079,20 @@ TEST(config, reads_routing_limits_and_refuses_them_out_of_range) {
   EXPECT_EQ(defaults.limits.routes, 16384u);
   EXPECT_EQ(defaults.max_neighbours, 512u);
   EXPECT_EQ(defaults.max_neighbours_per_channel, 128u);
+  EXPECT_EQ(defaults.max_floods, 8192u);
   auto r = parse_ok(lines({"module:", "  name: m", "  limits:",
                            "    destinations: 100",
                            "    destinations_per_neighbour: 50",
                            "    routes: 400", "    neighbours: 20",
-                           "    neighbours_per_channel: 10"}))
+                           "    neighbours_per_channel: 10",
+                           "    floods: 300"}))
              .module.routing;
   EXPECT_EQ(r.limits.destinations, 100u);
   EXPECT_EQ(r.limits.per_neighbour, 50u);
   EXPECT_EQ(r.limits.routes, 400u);
   EXPECT_EQ(r.max_neighbours, 20u);
   EXPECT_EQ(r.max_neighbours_per_channel, 10u);
+  EXPECT_EQ(r.max_floods, 300u);
   EXPECT_EQ(parse_error(lines({"module:", "  name: m", "  limits:",
                                "    destinations: 0"})),
             "robot.yaml:4: module.limits.destinations: expected an integer "
@@ -1097,6 +1100,6 @@ TEST(config, reads_routing_limits_and_refuses_them_out_of_range) {
   EXPECT_EQ(parse_error(lines({"module:", "  name: m", "  limits:",
                                "    destination: 10"})),
             "robot.yaml:4: module.limits.destination: unknown key (expected "
-            "destinations, destinations_per_neighbour, routes, neighbours or "
-            "neighbours_per_channel)");
+            "destinations, destinations_per_neighbour, routes, neighbours, "
+            "neighbours_per_channel or floods)");
 }

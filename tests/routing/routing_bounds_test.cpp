@@ -307,7 +307,7 @@ TEST_F(bounds_sim, distinct_floods_past_the_memory_forget_the_oldest_and_count_i
 }
 
 TEST_F(bounds_sim, distinct_broadcasts_past_the_memory_forget_the_oldest_and_count_it) {
-  three x{*this, [](routing_config& cfg) { cfg.max_flood_ids = 8; }};
+  three x{*this, [](routing_config& cfg) { cfg.max_floods = 8; }};
   auto& net = x.net;
   net.start();
   net.advance(1s);
