@@ -161,18 +161,23 @@ class Report:
         self.targets.append(f"| {what} | {measured} | {against} | {ratio} | "
                             f"{goal} | {verdict(ok)} |")
 
-    def missing(self, title, fname):
-        self.out(f"### {title}", "",
-                 f"Not in this run (no `{fname}` in the results).", "")
+    def section(self, title, fname):
+        """Starts the section `title` on the results file `fname`: returns its
+        parsed JSON after writing the heading, or None after writing the
+        heading and a "not in this run" line when the file is absent."""
+        doc = load(f"{self.dir}/{fname}")
+        self.out(f"### {title}", "")
+        if doc is None:
+            self.out(f"Not in this run (no `{fname}` in the results).", "")
+        return doc
 
     # CAN ------------------------------------------------------------------------
     def can(self):
-        doc = load(f"{self.dir}/can_efficiency.json")
-        title = "CAN: payload efficiency and frame rate, emulated 1 Mbit/s bus"
+        doc = self.section("CAN: payload efficiency and frame rate, emulated 1 Mbit/s bus",
+                           "can_efficiency.json")
         if doc is None:
-            return self.missing(title, "can_efficiency.json")
-        self.out(f"### {title}", "",
-                 "Command: `bench_can_efficiency` (two stations of the `can` "
+            return
+        self.out("Command: `bench_can_efficiency` (two stations of the `can` "
                  "driver's emulated bus, HERM's port stack). Limit: frames/s of "
                  "8-byte frames at 1 Mbit/s for this identifier format, computed "
                  "in the same run; bus load counts every frame's exact bits "
@@ -220,12 +225,10 @@ class Report:
 
     # serial -----------------------------------------------------------------------
     def serial(self):
-        doc = load(f"{self.dir}/serial_goodput.json")
-        title = "Serial: goodput at 19,200 baud"
+        doc = self.section("Serial: goodput at 19,200 baud", "serial_goodput.json")
         if doc is None:
-            return self.missing(title, "serial_goodput.json")
-        self.out(f"### {title}", "",
-                 "Command: `bench_serial_goodput` (two `serial` drivers on a "
+            return
+        self.out("Command: `bench_serial_goodput` (two `serial` drivers on a "
                  "paced pseudo-terminal cable, 8N1, MTU 32). Line rate: baud / "
                  "10 bytes/s, the relay's own pacing in the same run. The "
                  "target applies to packets of a full frame or more; an 8-byte "
@@ -263,12 +266,11 @@ class Report:
 
     # emulated media ---------------------------------------------------------------
     def emu(self):
-        doc = load(f"{self.dir}/emu_bandwidth.json")
-        title = "Emulated media: delivered against configured bandwidth"
+        doc = self.section("Emulated media: delivered against configured bandwidth",
+                           "emu_bandwidth.json")
         if doc is None:
-            return self.missing(title, "emu_bandwidth.json")
-        self.out(f"### {title}", "",
-                 "Command: `bench_emu_bandwidth` (MTU-sized frames back to back "
+            return
+        self.out("Command: `bench_emu_bandwidth` (MTU-sized frames back to back "
                  "through the `emu` driver; the ceiling probes show the machine's "
                  "frame rate, not a target).", "",
                  "| profile | configured bit/s | delivered bit/s | ratio "
@@ -300,12 +302,10 @@ class Report:
 
     # fragmentation ----------------------------------------------------------------
     def fragmentation(self):
-        doc = load(f"{self.dir}/fragmentation.json")
-        title = "Fragmentation and reassembly"
+        doc = self.section("Fragmentation and reassembly", "fragmentation.json")
         if doc is None:
-            return self.missing(title, "fragmentation.json")
-        self.out(f"### {title}", "",
-                 "Command: `bench_fragmentation --benchmark_filter="
+            return
+        self.out("Command: `bench_fragmentation --benchmark_filter="
                  "split_and_reassemble` (one packet split and reassembled, CRC "
                  "included; CPU time per packet).", "",
                  "| packet | MTU | time per packet | throughput | efficiency |",
@@ -328,12 +328,11 @@ class Report:
 
     # routing ---------------------------------------------------------------------
     def routing(self):
-        doc = load(f"{self.dir}/routing_convergence.json")
-        title = "Routing: cold-start convergence and repair (simulated time)"
+        doc = self.section("Routing: cold-start convergence and repair (simulated time)",
+                           "routing_convergence.json")
         if doc is None:
-            return self.missing(title, "routing_convergence.json")
-        self.out(f"### {title}", "",
-                 f"Command: `{doc.get('command', 'bench_routing_convergence')}` "
+            return
+        self.out(f"Command: `{doc.get('command', 'bench_routing_convergence')}` "
                  "(deterministic: simulated time, so one run; random meshes with "
                  "a third of the extra links 3-station CAN buses; converged is "
                  "checked every tenth of a hello interval).", "",
@@ -377,13 +376,12 @@ class Report:
 
     # round trips -------------------------------------------------------------------
     def rtt(self):
-        doc = load(f"{self.dir}/rtt.json")
+        doc = self.section("Request round trips next to peers", "rtt.json")
         if doc is None:
-            return self.missing("Request round trips next to peers", "rtt.json")
+            return
         cases = [c for c in doc.get("cases", [])]
         params = doc.get("parameters", {})
-        self.out("### Request round trips next to peers", "",
-                 f"Command: `{doc.get('command', 'herm-bench-rtt')}` (two fresh "
+        self.out(f"Command: `{doc.get('command', 'herm-bench-rtt')}` (two fresh "
                  f"processes per case on 127.0.0.1, {params.get('repeat', '?')} "
                  "run(s) with the repetitions outermost). Cells: p50 in µs as the "
                  "median of the runs' p50 [min..max], then the ratio to the "
@@ -520,14 +518,12 @@ class Report:
 
     # footprint ------------------------------------------------------------------
     def footprint(self):
-        doc = load(f"{self.dir}/footprint.json")
-        title = "hermd's idle footprint"
+        doc = self.section("hermd's idle footprint", "footprint.json")
         if doc is None:
-            return self.missing(title, "footprint.json")
+            return
         p = doc.get("parameters", {})
         t = doc.get("targets", {"cpu_pct": 1.0, "rss_mb": 20.0})
-        self.out(f"### {title}", "",
-                 f"Command: `{doc.get('command', 'hermd_footprint.py')}`: every "
+        self.out(f"Command: `{doc.get('command', 'hermd_footprint.py')}`: every "
                  f"process started at once, {num(p.get('settle_s'))} s to "
                  f"settle, then sampled over {num(p.get('window_s'))} s; "
                  f"{p.get('runs', '?')} run(s). CPU: utime + stime over the "
