@@ -47,7 +47,7 @@ import subprocess
 import sys
 import tempfile
 
-STRICT = ["docs/protocol.md", "docs/user-guide.md"]
+STRICT = ["docs/architecture.md", "docs/protocol.md", "docs/user-guide.md"]
 MARK = re.compile(r"^<!-- ([a-z]+)(?::\s*(.*?))?\s*-->\s*$")
 KINDS = {"quote", "excerpt", "config", "run", "usage", "json", "test",
          "unchecked"}
