@@ -188,12 +188,10 @@ public:
     if (!handler)
       return fail(ec::invalid_parameter, "start needs a frame handler");
     handler_ = std::move(handler);
-    try {
-      thread_ = std::thread{[this] { receive_loop(); }};
-    } catch (const std::system_error& ex) {
+    if (auto why = posix::start_thread(thread_, "receive",
+                                       [this] { receive_loop(); })) {
       handler_.reset();
-      return fail(ec::device_unavailable,
-                  std::string{"cannot start the receive thread: "} + ex.what());
+      return fail(ec::device_unavailable, *why);
     }
     state_ = state::running;
     return caf::none;
@@ -205,15 +203,11 @@ public:
       return;
     state_ = state::stopped;
     stopping_.store(true);
-    wake();
-    if (thread_.joinable()) {
-      if (thread_.get_id() == std::this_thread::get_id()) {
-        // Called from a handler: the loop ends after this callback and
-        // still uses the descriptors, so leave them open until destruction.
-        thread_.detach();
-        return;
-      }
-      thread_.join();
+    if (!posix::wake_and_join(thread_, wake_fd_.get())) {
+      // Called from a handler: the loop ends after this callback and
+      // still uses the descriptors, so leave them open until destruction.
+      thread_.detach();
+      return;
     }
     handler_.reset();
     std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
@@ -275,10 +269,7 @@ private:
   enum class state { opened, running, stopped };
 
   void wake() {
-    if (wake_fd_) {
-      uint64_t one = 1;
-      [[maybe_unused]] auto res = ::write(wake_fd_.get(), &one, sizeof(one));
-    }
+    posix::signal_eventfd(wake_fd_.get());
   }
 
   void report_failure(int err) {

@@ -68,56 +68,36 @@ caf::expected<can_config> read_config(const device_config& cfg) {
                   "option 'node' is required: this module's node id on the "
                   "bus, 1.."
                     + std::to_string(max_node));
-  auto node = r.u64("node", 0, 1, max_node);
-  if (!node)
-    return node.error();
-  c.node = static_cast<uint8_t>(*node);
-  auto fd = r.flag("fd", false);
-  if (!fd)
-    return fd.error();
-  c.fd = *fd;
+  if (auto err = read_into(c.node, r.u64("node", 0, 1, max_node)))
+    return err;
+  if (auto err = read_into(c.fd, r.flag("fd", false)))
+    return err;
   if (c.fd && c.format == can::id_format::std11)
     return r.fail(ec::invalid_parameter,
                   "option 'fd' needs id_format=29bit (11-bit identifiers "
                   "have no room for CAN FD padding)");
-  auto bitrate = r.u64("bitrate", 1'000'000, 1'000, 10'000'000);
-  if (!bitrate)
-    return bitrate.error();
-  c.bitrate = *bitrate;
-  auto stuffing = r.flag("stuffing", false);
-  if (!stuffing)
-    return stuffing.error();
-  c.stuffing = *stuffing;
-  auto coef = r.real("delay_coef", 1.0, 0.001, 1000.0);
-  if (!coef)
-    return coef.error();
-  c.delay_coef = *coef;
+  if (auto err
+      = read_into(c.bitrate, r.u64("bitrate", 1'000'000, 1'000, 10'000'000)))
+    return err;
+  if (auto err = read_into(c.stuffing, r.flag("stuffing", false)))
+    return err;
+  if (auto err
+      = read_into(c.delay_coef, r.real("delay_coef", 1.0, 0.001, 1000.0)))
+    return err;
   if (c.kind == backend::socketcan) {
-    auto filter = r.flag("filter", true);
-    if (!filter)
-      return filter.error();
-    c.filter = *filter;
+    if (auto err = read_into(c.filter, r.flag("filter", true)))
+      return err;
   } else {
-    auto queue = r.u64("queue", 64, 1, 65'536);
-    if (!queue)
-      return queue.error();
-    c.queue = *queue;
-    auto loss = r.real("loss", 0, 0, 1);
-    if (!loss)
-      return loss.error();
-    c.loss = *loss;
-    auto error_rate = r.real("error_rate", 0, 0, 0.9);
-    if (!error_rate)
-      return error_rate.error();
-    c.error_rate = *error_rate;
-    auto seed = r.u64("seed", 0, 0, UINT64_MAX);
-    if (!seed)
-      return seed.error();
-    c.seed = *seed;
-    auto create = r.flag("create", true);
-    if (!create)
-      return create.error();
-    c.create = *create;
+    if (auto err = read_into(c.queue, r.u64("queue", 64, 1, 65'536)))
+      return err;
+    if (auto err = read_into(c.loss, r.real("loss", 0, 0, 1)))
+      return err;
+    if (auto err = read_into(c.error_rate, r.real("error_rate", 0, 0, 0.9)))
+      return err;
+    if (auto err = read_into(c.seed, r.u64("seed", 0, 0, UINT64_MAX)))
+      return err;
+    if (auto err = read_into(c.create, r.flag("create", true)))
+      return err;
   }
   if (auto err = r.finish())
     return err;
@@ -169,16 +149,15 @@ can_driver::get_param(const std::string& key) const {
     return std::string{cfg_.fd ? "true" : "false"};
   if (key == "interface")
     return cfg_.interface;
-  if (key == "tx_frames")
-    return std::to_string(tx_frames_.load());
-  if (key == "rx_frames")
-    return std::to_string(rx_frames_.load());
-  if (key == "rx_malformed")
-    return std::to_string(rx_malformed_.load());
-  if (key == "rx_filtered")
-    return std::to_string(rx_filtered_.load());
-  if (key == "error_frames")
-    return std::to_string(error_frames_.load());
+  static constexpr counter_param<can_driver> counters[] = {
+    {"tx_frames", &can_driver::tx_frames_},
+    {"rx_frames", &can_driver::rx_frames_},
+    {"rx_malformed", &can_driver::rx_malformed_},
+    {"rx_filtered", &can_driver::rx_filtered_},
+    {"error_frames", &can_driver::error_frames_},
+  };
+  if (auto value = read_counter(*this, counters, key))
+    return *value;
   return link_driver::get_param(key);
 }
 

@@ -14,6 +14,7 @@
 #include <linux/can.h>
 
 #include "channels/drivers/can_id.hpp"
+#include "channels/drivers/params.hpp"
 #include "channels/error.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"

@@ -154,13 +154,9 @@ public:
 
 
   caf::error start_transmitter() {
-    try {
-      tx_thread_ = std::thread{[this] { transmit_loop(); }};
-    } catch (const std::system_error& ex) {
-      return fail(ec::device_unavailable,
-                  std::string{"cannot start the transmit thread: "}
-                    + ex.what());
-    }
+    if (auto why = posix::start_thread(tx_thread_, "transmit",
+                                       [this] { transmit_loop(); }))
+      return fail(ec::device_unavailable, *why);
     return caf::none;
   }
 
@@ -175,14 +171,11 @@ public:
     if (rx_thread_.joinable())
       return fail(ec::device_unavailable, "already started");
     handler_ = std::move(handler);
-    try {
-      rx_thread_ = std::thread{[this] {
-        station_.receive_loop(wire::header_size + CANFD_MTU);
-      }};
-    } catch (const std::system_error& ex) {
+    if (auto why = posix::start_thread(rx_thread_, "receive", [this] {
+          station_.receive_loop(wire::header_size + CANFD_MTU);
+        })) {
       handler_.reset();
-      return fail(ec::device_unavailable,
-                  std::string{"cannot start the receive thread: "} + ex.what());
+      return fail(ec::device_unavailable, *why);
     }
     return caf::none;
   }
@@ -242,20 +235,10 @@ public:
     device_config tmp{cfg_.name, "can", emu_scheme + cfg_.interface,
                       {{key, value}}};
     option_reader r{tmp};
-    if (key == "loss") {
-      auto x = r.real(key, 0, 0, 1);
-      if (!x)
-        return x.error();
-      loss_.store(*x);
-      return caf::none;
-    }
-    if (key == "error_rate") {
-      auto x = r.real(key, 0, 0, 0.9);
-      if (!x)
-        return x.error();
-      error_rate_.store(*x);
-      return caf::none;
-    }
+    if (key == "loss")
+      return read_into(loss_, r.real(key, 0, 0, 1));
+    if (key == "error_rate")
+      return read_into(error_rate_, r.real(key, 0, 0, 0.9));
     return fail(ec::invalid_parameter,
                 "parameter '" + key
                   + "' cannot be changed on an emulated CAN bus (changeable: "
@@ -269,14 +252,15 @@ public:
       return format_double(loss_.load());
     if (key == "error_rate")
       return format_double(error_rate_.load());
-    if (key == "tx_lost")
-      return std::to_string(tx_lost_.load());
+    static constexpr counter_param<emu_can_driver> counters[] = {
+      {"tx_lost", &emu_can_driver::tx_lost_},
+      {"tx_errors", &emu_can_driver::tx_errors_},
+      {"arbitration_lost", &emu_can_driver::arbitration_lost_},
+    };
+    if (auto value = read_counter(*this, counters, key))
+      return *value;
     if (key == "tx_overruns")
       return std::to_string(station_.overruns());
-    if (key == "tx_errors")
-      return std::to_string(tx_errors_.load());
-    if (key == "arbitration_lost")
-      return std::to_string(arbitration_lost_.load());
     return can_driver::get_param(key);
   }
 

@@ -35,6 +35,7 @@
 #include "channels/drivers/emu_medium.hpp"
 #include "channels/drivers/emu_wire.hpp"
 #include "channels/drivers/medium_dir.hpp"
+#include "channels/drivers/params.hpp"
 #include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
@@ -116,29 +117,25 @@ caf::expected<emu_config> read_config(const device_config& cfg) {
   option_reader r{cfg};
   emu_config result;
   result.name = cfg.name;
-  auto prof = r.profile("ieee1394a");
-  if (!prof)
-    return prof.error();
-  result.profile = std::move(*prof);
+  if (auto err = read_into(result.profile, r.profile("ieee1394a")))
+    return err;
   if (r.has("station")) {
-    auto x = r.u64("station", 0, emu::min_station, emu::max_station);
-    if (!x)
-      return x.error();
-    result.station = *x;
+    if (auto err = read_into(result.station,
+                             r.u64("station", 0, emu::min_station,
+                                   emu::max_station)))
+      return err;
   }
   auto form = r.str("form", result.profile.multi_access ? "bus" : "p2p");
   if (form != "bus" && form != "p2p")
     return r.fail(ec::invalid_parameter,
                   "option 'form' expects bus or p2p, got '" + form + "'");
   result.p2p = form == "p2p";
-  auto latency = r.u64("latency_us", 0, 0, emu::max_latency_us);
-  if (!latency)
-    return latency.error();
-  result.latency_us = *latency;
-  auto jitter = r.u64("jitter_us", 0, 0, emu::max_jitter_us);
-  if (!jitter)
-    return jitter.error();
-  result.jitter_us = *jitter;
+  if (auto err = read_into(result.latency_us,
+                           r.u64("latency_us", 0, 0, emu::max_latency_us)))
+    return err;
+  if (auto err = read_into(result.jitter_us,
+                           r.u64("jitter_us", 0, 0, emu::max_jitter_us)))
+    return err;
   for (auto [key, dst] : {std::pair{"loss", &result.loss},
                           std::pair{"duplicate", &result.duplicate},
                           std::pair{"corrupt", &result.corrupt}}) {
@@ -148,26 +145,18 @@ caf::expected<emu_config> read_config(const device_config& cfg) {
     *dst = *x;
   }
   if (r.has("seed")) {
-    auto seed = r.u64("seed", 0, 0, UINT64_MAX);
-    if (!seed)
-      return seed.error();
-    result.seed = *seed;
+    if (auto err = read_into(result.seed, r.u64("seed", 0, 0, UINT64_MAX)))
+      return err;
   } else {
     std::random_device rd;
     result.seed = (uint64_t{rd()} << 32) ^ rd();
   }
-  auto queue = r.u64("queue", 256, 1, 65'536);
-  if (!queue)
-    return queue.error();
-  result.queue = *queue;
-  auto create = r.flag("create", true);
-  if (!create)
-    return create.error();
-  result.create = *create;
-  auto fcs = r.flag("frame_check", true);
-  if (!fcs)
-    return fcs.error();
-  result.frame_check = *fcs;
+  if (auto err = read_into(result.queue, r.u64("queue", 256, 1, 65'536)))
+    return err;
+  if (auto err = read_into(result.create, r.flag("create", true)))
+    return err;
+  if (auto err = read_into(result.frame_check, r.flag("frame_check", true)))
+    return err;
   if (auto err = r.finish())
     return err;
   result.dir = cfg.interface;
@@ -267,11 +256,7 @@ public:
     if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
       return err;
     tx_frame f;
-    if (!spare_.empty()) {
-      f.bytes = std::move(spare_.back());
-      spare_.pop_back();
-    }
-    f.bytes.assign(data, data + size);
+    f.bytes = emu_medium::copy_reusing(spare_, data, size);
     f.dst = dst;
     f.enqueued_at = enqueued_at;
     queue_.push_back(std::move(f));
@@ -307,12 +292,11 @@ public:
     // Parse through option_reader so errors read like option errors.
     device_config tmp{cfg_.name, "emu", cfg_.dir, {{key, value}}};
     option_reader r{tmp};
-    if (key == "loss") {
-      auto x = r.real(key, 0, 0, 1);
-      if (!x)
-        return x.error();
-      loss_.store(*x);
-    } else if (key == "latency_us") {
+    if (key == "loss")
+      return read_into(loss_, r.real(key, 0, 0, 1));
+    if (key == "bandwidth")
+      return read_into(bandwidth_, r.u64(key, 0, 1, 100'000'000'000ull));
+    if (key == "latency_us") {
       auto x = r.u64(key, 0, 0, emu::max_latency_us);
       if (!x)
         return x.error();
@@ -322,11 +306,6 @@ public:
       if (!x)
         return x.error();
       jitter_ns_.store(int64_t(*x) * 1000);
-    } else if (key == "bandwidth") {
-      auto x = r.u64(key, 0, 1, 100'000'000'000ull);
-      if (!x)
-        return x.error();
-      bandwidth_.store(*x);
     } else {
       return make_error(ec::invalid_parameter,
                         prefix_ + "parameter '" + key
@@ -356,16 +335,16 @@ public:
     if (key == "medium")
       return cfg_.dir;
     // Counters, for tests and diagnostics.
-    if (key == "tx_frames")
-      return std::to_string(tx_frames_.load());
-    if (key == "tx_lost")
-      return std::to_string(tx_lost_.load());
+    static constexpr counter_param<emu_driver> counters[] = {
+      {"tx_frames", &emu_driver::tx_frames_},
+      {"tx_lost", &emu_driver::tx_lost_},
+      {"rx_frames", &emu_driver::rx_frames_},
+      {"rx_malformed", &emu_driver::rx_malformed_},
+    };
+    if (auto value = read_counter(*this, counters, key))
+      return *value;
     if (key == "tx_overruns")
       return std::to_string(station_.overruns());
-    if (key == "rx_frames")
-      return std::to_string(rx_frames_.load());
-    if (key == "rx_malformed")
-      return std::to_string(rx_malformed_.load());
     return link_driver::get_param(key);
   }
 

@@ -60,11 +60,7 @@ arbitration arbitrate(contender mine, const contender* rivals, size_t count,
 
 void hold_queue::push(int64_t deliver_at, const uint8_t* data, size_t size) {
   held h;
-  if (!spare_.empty()) {
-    h.bytes = std::move(spare_.back());
-    spare_.pop_back();
-  }
-  h.bytes.assign(data, data + size);
+  h.bytes = copy_reusing(spare_, data, size);
   h.deliver_at = deliver_at;
   h.seq = next_seq_++;
   heap_.push_back(std::move(h));

@@ -35,6 +35,7 @@
 #include <random>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <caf/expected.hpp>
@@ -172,6 +173,21 @@ arbitration arbitrate(contender mine, const contender* rivals, size_t count,
                       int64_t busy);
 
 // -- pure parts: the hold queue ------------------------------------------------
+
+/// A copy of `size` bytes of `data` in the last buffer of `spare`, taken out
+/// of it so that its capacity is reused (steady traffic allocates nothing),
+/// or in a new buffer when `spare` is empty. O(size).
+inline std::vector<uint8_t>
+copy_reusing(std::vector<std::vector<uint8_t>>& spare, const uint8_t* data,
+             size_t size) {
+  std::vector<uint8_t> result;
+  if (!spare.empty()) {
+    result = std::move(spare.back());
+    spare.pop_back();
+  }
+  result.assign(data, data + size);
+  return result;
+}
 
 /// Received datagrams held until their delivery time, earliest first, in
 /// arrival order among equal times. Capacity is the caller's to enforce

@@ -8,8 +8,10 @@
 
 #include <cstdint>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <system_error>
+#include <thread>
 #include <utility>
 
 namespace herm::posix {
@@ -60,6 +62,49 @@ public:
 private:
   int fd_ = -1;
 };
+
+/// Adds 1 to the eventfd `fd`, waking whoever polls it; does nothing when
+/// `fd` < 0. A write of 1 fails only when the counter would overflow
+/// (2^64 - 2 wake-ups pending), which no reader lets happen, so nothing is
+/// reported. Any thread; never blocks (the eventfd is non-blocking).
+inline void signal_eventfd(int fd) {
+  if (fd < 0)
+    return;
+  uint64_t one = 1;
+  [[maybe_unused]] auto res = ::write(fd, &one, sizeof(one));
+}
+
+/// Starts `thread` (not joinable on entry) running `body`. Returns nullopt
+/// when it runs, else the reason, word for word "cannot start the " + `what`
+/// + " thread: " + the system's text; `thread` stays not joinable then.
+template <class F>
+std::optional<std::string>
+start_thread(std::thread& thread, const char* what, F&& body) {
+  try {
+    thread = std::thread{std::forward<F>(body)};
+  } catch (const std::system_error& ex) {
+    return std::string{"cannot start the "} + what + " thread: " + ex.what();
+  }
+  return std::nullopt;
+}
+
+/// Ends a driver's IO thread that polls the eventfd `wake_fd` and checks a
+/// stop flag the caller has already set: when `thread` is joinable and is
+/// not the calling thread, wakes it (signal_eventfd) and joins it, blocking
+/// until the loop notices. Returns false, doing nothing, when called on
+/// `thread` itself (stop() from a frame handler): that loop ends once the
+/// callback returns and still uses its descriptors, so the caller must leave
+/// them open (and join or detach `thread` later). True otherwise, including
+/// when `thread` never started.
+inline bool wake_and_join(std::thread& thread, int wake_fd) {
+  if (!thread.joinable())
+    return true;
+  if (thread.get_id() == std::this_thread::get_id())
+    return false;
+  signal_eventfd(wake_fd);
+  thread.join();
+  return true;
+}
 
 /// The kernel's receive-buffer drop count of a socket with SO_RXQ_OVFL
 /// enabled. The kernel attaches its cumulative count (modulo 2^32) to a

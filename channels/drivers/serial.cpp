@@ -225,12 +225,9 @@ public:
     if (!handler)
       return fail(ec::invalid_parameter, "start needs a frame handler");
     handler_ = std::move(handler);
-    try {
-      thread_ = std::thread{[this] { run(); }};
-    } catch (const std::system_error& ex) {
+    if (auto why = posix::start_thread(thread_, "IO", [this] { run(); })) {
       handler_.reset();
-      return fail(ec::device_unavailable,
-                  std::string{"cannot start the IO thread: "} + ex.what());
+      return fail(ec::device_unavailable, *why);
     }
     state_ = state::running;
     return caf::none;
@@ -244,12 +241,8 @@ public:
     if (state_ == state::stopped)
       return;
     stopping_ = true;
-    if (thread_.joinable()) {
-      if (thread_.get_id() == std::this_thread::get_id())
-        return; // Called from a handler: the loop ends after this callback.
-      wake();
-      thread_.join();
-    }
+    if (!posix::wake_and_join(thread_, wake_fd_))
+      return; // Called from a handler: the loop ends after this callback.
     handler_.reset();
     {
       std::lock_guard<std::mutex> tx_guard{tx_mtx_};
@@ -385,22 +378,20 @@ public:
       return std::string{set_.exclusive ? "true" : "false"};
     if (key == "bits_per_char")
       return std::to_string(set_.format.bits_per_char());
-    if (key == "tx_frames")
-      return std::to_string(tx_frames_.load());
-    if (key == "tx_bytes")
-      return std::to_string(tx_bytes_.load());
-    if (key == "tx_queue_full")
-      return std::to_string(tx_queue_full_.load());
+    static constexpr counter_param<serial_driver> counters[] = {
+      {"tx_frames", &serial_driver::tx_frames_},
+      {"tx_bytes", &serial_driver::tx_bytes_},
+      {"tx_queue_full", &serial_driver::tx_queue_full_},
+      {"rx_frames", &serial_driver::rx_frames_},
+      {"rx_bytes", &serial_driver::rx_bytes_},
+      {"rx_idle", &serial_driver::rx_idle_},
+    };
+    if (auto value = read_counter(*this, counters, key))
+      return *value;
     if (key == "tx_queued") {
       std::lock_guard<std::mutex> guard{tx_mtx_};
       return std::to_string(tx_.size() - tx_head_);
     }
-    if (key == "rx_frames")
-      return std::to_string(rx_frames_.load());
-    if (key == "rx_bytes")
-      return std::to_string(rx_bytes_.load());
-    if (key == "rx_idle")
-      return std::to_string(rx_idle_.load());
     if (key == "rx_malformed") {
       uint64_t sum = 0;
       for (auto& x : rx_errors_)
@@ -428,9 +419,7 @@ private:
   }
 
   void wake() {
-    uint64_t one = 1;
-    // An eventfd write of 1 cannot fail short of overflow.
-    [[maybe_unused]] auto res = ::write(wake_fd_, &one, sizeof(one));
+    posix::signal_eventfd(wake_fd_);
   }
 
   /// Writes buffered bytes until the tty takes no more. Returns 0, EAGAIN

@@ -34,6 +34,7 @@
 
 #include "channels/error.hpp"
 #include "channels/drivers/serial_framing.hpp"
+#include "channels/drivers/params.hpp"
 #include "channels/messages.hpp"
 #include "channels/options.hpp"
 
@@ -188,10 +189,11 @@ inline caf::expected<settings> read_settings(const device_config& cfg) {
     return opts.fail(ec::invalid_parameter,
                      "no serial line given (the interface of a serial device "
                      "is a tty path such as /dev/ttyUSB0)");
-  auto prof = opts.profile(is_cdc_acm_path(result.path) ? "usb1.1" : "rs232c");
-  if (!prof)
-    return prof.error();
-  result.profile = std::move(*prof);
+  if (auto err = read_into(result.profile,
+                           opts.profile(is_cdc_acm_path(result.path)
+                                          ? "usb1.1"
+                                          : "rs232c")))
+    return err;
   if (opts.has("mtu")) {
     if (result.profile.mtu > max_mtu)
       return opts.fail(ec::invalid_parameter,
@@ -205,12 +207,12 @@ inline caf::expected<settings> read_settings(const device_config& cfg) {
   auto* base = find_profile(result.profile.name);
   auto profile_rate = base != nullptr ? base->bandwidth_bps : 0;
   bool explicit_baud = opts.has("baud");
-  auto baud = read_baud(opts, "baud",
-                        is_standard_baud(profile_rate) ? profile_rate
-                                                       : fallback_baud);
-  if (!baud)
-    return baud.error();
-  result.baud = *baud;
+  if (auto err = read_into(result.baud,
+                           read_baud(opts, "baud",
+                                     is_standard_baud(profile_rate)
+                                       ? profile_rate
+                                       : fallback_baud)))
+    return err;
   if (opts.has("bandwidth"))
     result.bandwidth_follows_baud = false;
   else if (explicit_baud || is_standard_baud(profile_rate))
@@ -237,10 +239,8 @@ inline caf::expected<settings> read_settings(const device_config& cfg) {
                      "option 'flow' expects none, rtscts or xonxoff, got '"
                        + flow_text + "'");
   result.flow = *flow;
-  auto exclusive = opts.flag("exclusive", true);
-  if (!exclusive)
-    return exclusive.error();
-  result.exclusive = *exclusive;
+  if (auto err = read_into(result.exclusive, opts.flag("exclusive", true)))
+    return err;
   if (auto err = opts.finish())
     return err;
   return result;

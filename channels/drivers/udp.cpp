@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "channels/error.hpp"
+#include "channels/drivers/params.hpp"
 #include "channels/drivers/udp_addr.hpp"
 #include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"
@@ -129,12 +130,9 @@ public:
         = controls_.data() + i * (rx_control_size / sizeof(uint64_t) + 1);
     }
     handler_ = std::move(handler);
-    try {
-      thread_ = std::thread{[this] { run(); }};
-    } catch (const std::system_error& ex) {
+    if (auto why = posix::start_thread(thread_, "receive", [this] { run(); })) {
       handler_.reset();
-      return fail(ec::device_unavailable,
-                  std::string{"cannot start the receive thread: "} + ex.what());
+      return fail(ec::device_unavailable, *why);
     }
     state_ = state::running;
     return caf::none;
@@ -145,14 +143,8 @@ public:
     if (state_ == state::stopped)
       return;
     stopping_ = true;
-    if (thread_.joinable()) {
-      if (thread_.get_id() == std::this_thread::get_id())
-        return; // Called from a handler: the loop ends after this callback.
-      uint64_t one = 1;
-      // An eventfd write of 1 cannot fail short of overflow.
-      [[maybe_unused]] auto res = ::write(wake_fd_, &one, sizeof(one));
-      thread_.join();
-    }
+    if (!posix::wake_and_join(thread_, wake_fd_))
+      return; // Called from a handler: the loop ends after this callback.
     handler_.reset();
     {
       std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
@@ -456,10 +448,8 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
   };
   udp_settings set;
   set.device = cfg.name;
-  auto prof = opts.profile("ethernet");
-  if (!prof)
-    return prof.error();
-  set.profile = std::move(*prof);
+  if (auto err = read_into(set.profile, opts.profile("ethernet")))
+    return err;
   // Without an explicit mtu, a frame must fit one Ethernet frame's UDP
   // payload (a smaller profile MTU, e.g. can2.0 emulated over UDP, stays).
   if (!opts.has("mtu"))
@@ -471,10 +461,8 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
                   + "' is not an IPv4 address and port to bind "
                     "(e.g. 0.0.0.0:47000 or 127.0.0.1:0)");
   set.bind_addr = *bind_addr;
-  auto peers = parse_peers(opts);
-  if (!peers)
-    return peers.error();
-  set.peers = std::move(*peers);
+  if (auto err = read_into(set.peers, parse_peers(opts)))
+    return err;
   if (opts.has("broadcast")) {
     auto text = opts.str("broadcast");
     auto addr = udp::parse_addr(text, false);
@@ -496,10 +484,9 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
   const char* buf_keys[2] = {"rcvbuf", "sndbuf"};
   for (int i = 0; i < 2; ++i)
     if (opts.has(buf_keys[i])) {
-      auto val = opts.u64(buf_keys[i], 0, 1024, INT_MAX / 2);
-      if (!val)
-        return val.error();
-      bufs[i] = *val;
+      if (auto err
+          = read_into(bufs[i], opts.u64(buf_keys[i], 0, 1024, INT_MAX / 2)))
+        return err;
     }
   if (auto err = opts.finish())
     return err;

@@ -47,6 +47,8 @@
 #include <utility>
 #include <vector>
 
+#include "channels/drivers/posix.hpp"
+
 namespace herm::test {
 
 /// One pseudo-terminal: the master (non-blocking) and the slave, kept open so
@@ -133,10 +135,9 @@ public:
               + std::error_code(errno, std::generic_category()).message();
       return nullptr;
     }
-    try {
-      result->thread_ = std::thread{[p = result.get()] { p->run(); }};
-    } catch (const std::system_error& ex) {
-      error = std::string{"cannot start the relay thread: "} + ex.what();
+    if (auto why = posix::start_thread(result->thread_, "relay",
+                                       [p = result.get()] { p->run(); })) {
+      error = std::move(*why);
       return nullptr;
     }
     return result;
@@ -260,10 +261,7 @@ private:
   }
 
   void poke() {
-    if (wake_fd_ < 0)
-      return;
-    uint64_t one = 1;
-    [[maybe_unused]] auto n = ::write(wake_fd_, &one, sizeof(one));
+    posix::signal_eventfd(wake_fd_);
   }
 
   void halt() {
