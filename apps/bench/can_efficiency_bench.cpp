@@ -35,7 +35,6 @@
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
-#include <ftw.h>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -44,6 +43,7 @@
 #include <unistd.h>
 
 #include "actors/runtime/error.hpp"
+#include "apps/bench/bench_common.hpp"
 #include "channels/drivers/can_id.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/port.hpp"
@@ -53,20 +53,12 @@ using namespace std::chrono_literals;
 
 namespace {
 
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
-
-int remove_entry(const char* path, const struct stat*, int, FTW*) {
-  return ::remove(path);
-}
+using bench::now_ns;
 
 /// Receiving side: feeds frames into a port stack and counts what comes
 /// out. Called by the receiving driver's thread only; read by the
 /// benchmark thread through atomics.
-class packet_counter : public frame_handler {
+class packet_counter : public bench::ignoring_handler {
 public:
   explicit packet_counter(std::unique_ptr<packet_port> port)
     : port_(std::move(port)) {
@@ -91,9 +83,6 @@ public:
 
   void on_malformed(link_addr, const char*) override {
     failed_.store(true);
-  }
-
-  void on_event(link_event_kind, link_addr, std::string) override {
   }
 
   void on_failure(caf::error) override {
@@ -126,32 +115,17 @@ private:
   std::atomic<bool> failed_{false};
 };
 
-class null_handler : public frame_handler {
-public:
-  void on_frame(link_addr, const uint8_t*, size_t) override {
-  }
-  void on_malformed(link_addr, const char*) override {
-  }
-  void on_event(link_event_kind, link_addr, std::string) override {
-  }
-  void on_failure(caf::error) override {
-  }
-};
-
 void can_efficiency(benchmark::State& state, const char* id_format,
                     bool stuffing) {
   auto packet_size = static_cast<size_t>(state.range(0));
   // About half a second of bus time per iteration.
   auto packets = static_cast<uint64_t>(state.range(1));
-  char tmpl[] = "/tmp/herm-can-bench-XXXXXX";
-  if (::mkdtemp(tmpl) == nullptr) {
+  auto root = bench::make_temp_dir("herm-can-bench");
+  if (root.empty()) {
     state.SkipWithError("mkdtemp failed");
     return;
   }
-  std::string root = tmpl;
-  auto cleanup = [&] {
-    ::nftw(root.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS);
-  };
+  auto cleanup = [&] { bench::remove_tree(root); };
   auto* kind = find_link_kind("can");
   option_map common{{"id_format", id_format},
                     {"stuffing", stuffing ? "true" : "false"},
@@ -189,7 +163,7 @@ void can_efficiency(benchmark::State& state, const char* id_format,
   }
   auto counter = std::make_shared<packet_counter>(std::move(*rx_port));
   (*rx)->start(counter);
-  (*tx)->start(std::make_shared<null_handler>());
+  (*tx)->start(std::make_shared<bench::ignoring_handler>());
   auto format = std::string{id_format} == "11bit" ? can::id_format::std11
                                                    : can::id_format::ext29;
   auto full_frame_ns = can::bits_time_ns(can::frame_bits(format, 8, stuffing),

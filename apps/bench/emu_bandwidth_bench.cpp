@@ -27,7 +27,6 @@
 #include <chrono>
 #include <cstdlib>
 #include <cstring>
-#include <ftw.h>
 #include <string>
 #include <thread>
 
@@ -35,6 +34,7 @@
 #include <unistd.h>
 
 #include "actors/runtime/error.hpp"
+#include "apps/bench/bench_common.hpp"
 #include "channels/drivers/emu_wire.hpp"
 #include "channels/link_driver.hpp"
 
@@ -42,19 +42,11 @@ using namespace herm;
 
 namespace {
 
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
-
-int remove_entry(const char* path, const struct stat*, int, FTW*) {
-  return ::remove(path);
-}
+using bench::now_ns;
 
 /// Counts frames and remembers when the first and the last arrived. Called
 /// by the receiving driver's thread only; read by the benchmark thread.
-class arrival_counter : public frame_handler {
+class arrival_counter : public bench::ignoring_handler {
 public:
   void reset() {
     count_.store(0);
@@ -73,8 +65,6 @@ public:
   void on_malformed(link_addr, const char*) override {
     malformed_.fetch_add(1);
   }
-
-  void on_event(link_event_kind, link_addr, std::string) override {}
 
   void on_failure(caf::error) override {
     failed_.store(true);
@@ -103,13 +93,12 @@ private:
 
 void emu_bandwidth(benchmark::State& state, const char* profile,
                    double burst_seconds, const char* bandwidth = nullptr) {
-  char tmpl[] = "/tmp/herm-emu-bench-XXXXXX";
-  if (::mkdtemp(tmpl) == nullptr) {
+  auto root = bench::make_temp_dir("herm-emu-bench");
+  if (root.empty()) {
     state.SkipWithError("mkdtemp failed");
     return;
   }
-  std::string root = tmpl;
-  auto cleanup = [&] { ::nftw(root.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS); };
+  auto cleanup = [&] { bench::remove_tree(root); };
   auto* kind = find_link_kind("emu");
   device_config tx_cfg{"tx0", "emu", root + "/medium",
                        {{"profile", profile}, {"station", "1"}}};

@@ -36,6 +36,7 @@
 #include <thread>
 
 #include "actors/runtime/error.hpp"
+#include "apps/bench/bench_common.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/port.hpp"
 #include "channels/testing/null_modem.hpp"
@@ -60,7 +61,7 @@ byte_buffer make_payload(size_t size) {
 }
 
 /// Reassembles on the receiving driver's IO thread; counted from outside.
-class packet_counter : public frame_handler {
+class packet_counter : public bench::ignoring_handler {
 public:
   packet_counter(std::unique_ptr<packet_port> port, byte_buffer expected)
     : port_(std::move(port)), expected_(std::move(expected)) {
@@ -79,9 +80,6 @@ public:
 
   void on_malformed(link_addr, const char*) override {
     malformed_.fetch_add(1);
-  }
-
-  void on_event(link_event_kind, link_addr, std::string) override {
   }
 
   void on_failure(caf::error) override {
@@ -111,18 +109,6 @@ private:
   std::atomic<uint64_t> altered_{0};
   std::atomic<uint64_t> malformed_{0};
   std::atomic<bool> failed_{false};
-};
-
-class ignore_all : public frame_handler {
-public:
-  void on_frame(link_addr, const uint8_t*, size_t) override {
-  }
-  void on_malformed(link_addr, const char*) override {
-  }
-  void on_event(link_event_kind, link_addr, std::string) override {
-  }
-  void on_failure(caf::error) override {
-  }
 };
 
 void serial_goodput(benchmark::State& state) {
@@ -166,7 +152,7 @@ void serial_goodput(benchmark::State& state) {
     }
   } guard{*tx, *rx};
   (*rx)->start(counter);
-  (*tx)->start(std::make_shared<ignore_all>());
+  (*tx)->start(std::make_shared<bench::ignoring_handler>());
   auto line_Bps = double(baud) / cable_cfg.bits_per_char;
   auto frames = (*tx_port)->frames_for(packet_size);
   // Bytes on the wire per packet, roughly: frame + CRC + COBS + delimiter.

@@ -4,36 +4,45 @@
 #include <memory>
 
 #include "caf/actor_system.hpp"
+#include "caf/actor_system_config.hpp"
 #include "caf/event_based_actor.hpp"
 #include "caf/stateful_actor.hpp"
 
 #include "actors/runtime/atoms.hpp"
 #include "actors/runtime/error.hpp"
+#include "actors/runtime/system.hpp"
 #include "apps/bench/peers/bench_types.hpp"
 
 namespace herm::bench {
 
 namespace {
 
-struct rtt_client_state {
-  static inline const char* name = "herm.bench.rtt_client";
+/// What both client actors hold: the target, the parameters, the payload
+/// buffer, and the result they hand to `done` when they finish.
+struct client_state_base {
   caf::actor target;
   endpoint_params params;
-  bool retry_no_route = false;
   std::vector<uint8_t> payload;
-  uint32_t next = 0; // index of the request in flight
-  bool answered = false; // a reply came: the route is there
-  int64_t t0 = 0;
   client_result result;
   std::shared_ptr<std::promise<client_result>> done;
 };
 
-using rtt_client_actor = caf::stateful_actor<rtt_client_state>;
-
-void finish(rtt_client_actor* self) {
+/// Hands the result to the waiting thread and ends the actor; called once.
+template <class State>
+void finish(caf::stateful_actor<State>* self) {
   self->state.done->set_value(std::move(self->state.result));
   self->quit();
 }
+
+struct rtt_client_state : client_state_base {
+  static inline const char* name = "herm.bench.rtt_client";
+  bool retry_no_route = false;
+  uint32_t next = 0; // index of the request in flight
+  bool answered = false; // a reply came: the route is there
+  int64_t t0 = 0;
+};
+
+using rtt_client_actor = caf::stateful_actor<rtt_client_state>;
 
 void send_next(rtt_client_actor* self) {
   auto& st = self->state;
@@ -92,6 +101,12 @@ caf::behavior rtt_client(rtt_client_actor* self, caf::actor target,
 
 } // namespace
 
+void configure_actor_system(caf::actor_system_config& cfg, const std::string& policy) {
+  auto [name, threads] = split_policy(policy);
+  configure(cfg, name, threads);
+  cfg.add_message_types<caf::id_block::herm_bench>();
+}
+
 client_result run_actor_client(caf::actor_system& sys, const caf::actor& target,
                                const endpoint_params& p, bool retry_no_route) {
   auto done = std::make_shared<std::promise<client_result>>();
@@ -114,11 +129,8 @@ namespace herm::bench {
 
 namespace {
 
-struct oneway_client_state {
+struct oneway_client_state : client_state_base {
   static inline const char* name = "herm.bench.oneway_client";
-  caf::actor target;
-  endpoint_params params;
-  std::vector<uint8_t> payload;
   uint32_t total = 0;
   uint32_t sent = 0;
   uint32_t acked = 0;
@@ -127,16 +139,9 @@ struct oneway_client_state {
   int hello_tries = 0;
   int done_tries = 0;
   uint64_t allocs_start = 0, allocs_end = 0;
-  client_result result;
-  std::shared_ptr<std::promise<client_result>> done;
 };
 
 using oneway_client_actor = caf::stateful_actor<oneway_client_state>;
-
-void finish(oneway_client_actor* self) {
-  self->state.done->set_value(std::move(self->state.result));
-  self->quit();
-}
 
 void fail(oneway_client_actor* self, std::string what) {
   self->state.result.error = std::move(what);

@@ -22,6 +22,11 @@
 
 namespace herm::bench {
 
+/// Sets up `cfg` for a process of an actor transport: the scheduler named by
+/// `policy` ("name[:threads]", see split_policy) and the bench's message
+/// types. The caller loads any further modules (caf: the middleman).
+void configure_actor_system(caf::actor_system_config& cfg, const std::string& policy);
+
 /// State of count_actor.
 struct count_state {
   static inline const char* name = "herm.bench.count";

@@ -24,9 +24,7 @@ namespace herm::bench {
 namespace {
 
 void configure_system(caf::actor_system_config& cfg, const std::string& policy) {
-  auto [name, threads] = split_policy(policy);
-  configure(cfg, name, threads);
-  cfg.add_message_types<caf::id_block::herm_bench>();
+  configure_actor_system(cfg, policy);
   cfg.load<caf::io::middleman>();
 }
 

@@ -297,19 +297,9 @@ client_result dds_client(const endpoint_params& p) {
     return res;
   }
   // Discovery: both of our endpoints matched with the server's.
-  auto until = now_ns() + 20'000'000'000;
-  for (;;) {
-    dds_publication_matched_status_t pm;
-    dds_subscription_matched_status_t sm;
-    dds_get_publication_matched_status(e.writer, &pm);
-    dds_get_subscription_matched_status(e.reader, &sm);
-    if (pm.current_count > 0 && sm.current_count > 0)
-      break;
-    if (now_ns() > until) {
-      res.error = "dds discovery: no match within 20 s";
-      return res;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  if (auto err = wait_for_match(e); !err.empty()) {
+    res.error = err;
+    return res;
   }
   std::vector<uint8_t> buf(p.size);
   octets out{};

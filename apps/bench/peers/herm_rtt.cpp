@@ -112,17 +112,11 @@ uint8_t wait_for_route(caf::actor_system& sys, const module_handles& m,
   }
 }
 
-void configure_system(caf::actor_system_config& cfg, const std::string& policy) {
-  auto [name, threads] = split_policy(policy);
-  configure(cfg, name, threads);
-  cfg.add_message_types<caf::id_block::herm_bench>();
-}
-
 } // namespace
 
 int herm_server(const endpoint_params& p) {
   caf::actor_system_config cfg;
-  configure_system(cfg, p.policy);
+  configure_actor_system(cfg, p.policy);
   caf::actor_system sys{cfg};
   // In router mode the only peer is the router's port facing this module.
   auto peer = p.mode == "router" ? p.port4 : p.port2;
@@ -145,7 +139,7 @@ int herm_server(const endpoint_params& p) {
 
 int herm_router(const endpoint_params& p) {
   caf::actor_system_config cfg;
-  configure_system(cfg, p.policy);
+  configure_actor_system(cfg, p.policy);
   caf::actor_system sys{cfg};
   module_config mc;
   mc.routing.id = router_id;
@@ -165,7 +159,7 @@ int herm_router(const endpoint_params& p) {
 client_result herm_client(const endpoint_params& p) {
   client_result res;
   caf::actor_system_config cfg;
-  configure_system(cfg, p.policy);
+  configure_actor_system(cfg, p.policy);
   caf::actor_system sys{cfg};
   bool router = p.mode == "router";
   auto m = start_module(sys, make_module(client_id, p.port2,
@@ -222,7 +216,7 @@ client_result herm_client(const endpoint_params& p) {
 client_result inprocess_client(const endpoint_params& p) {
   client_result res;
   caf::actor_system_config cfg;
-  configure_system(cfg, p.policy);
+  configure_actor_system(cfg, p.policy);
   caf::actor_system sys{cfg};
   // A module without devices: its application support layer is all that
   // matters when the APO is local.

@@ -611,22 +611,23 @@ int main(int argc, char** argv) {
   ::signal(SIGPIPE, SIG_IGN);
 
   if (quick) {
+    // --quick's defaults; an option given on the command line wins.
+    struct quick_default {
+      const char* option;
+      uint32_t* value;
+      uint32_t quick;
+    };
+    for (const auto& d : {quick_default{"--count", &count, 100},
+                          quick_default{"--warmup", &warmup, 20},
+                          quick_default{"--gap-count", &gap_count, 10},
+                          quick_default{"--gap-warmup", &gap_warmup, 2},
+                          quick_default{"--oneway-count", &oneway_count, 2000},
+                          quick_default{"--oneway-warmup", &oneway_warmup, 200},
+                          quick_default{"--repeat", &repeat, 1}})
+      if (app.count(d.option) == 0)
+        *d.value = d.quick;
     if (app.count("--sizes") == 0)
       sizes_arg = "256";
-    if (app.count("--count") == 0)
-      count = 100;
-    if (app.count("--warmup") == 0)
-      warmup = 20;
-    if (app.count("--gap-count") == 0)
-      gap_count = 10;
-    if (app.count("--gap-warmup") == 0)
-      gap_warmup = 2;
-    if (app.count("--oneway-count") == 0)
-      oneway_count = 2000;
-    if (app.count("--oneway-warmup") == 0)
-      oneway_warmup = 200;
-    if (app.count("--repeat") == 0)
-      repeat = 1;
     if (app.count("--hello-ms") == 0)
       ep.hello = 100ms; // the modules find each other sooner
   }

@@ -4,6 +4,7 @@
 // Each runs in a process of its own (herm-bench-rtt --role client|server),
 // started by the orchestrator in rtt.cpp. Everything stays on 127.0.0.1.
 
+#include <algorithm>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -216,14 +217,16 @@ void count_payload(oneway_counter& c, const uint8_t* data, int64_t n,
   }
 }
 
-/// The oneway sender's loop for blocking transports. `send_one(seq)` sends
-/// data message `seq` (returns an error text or empty);
+/// The oneway sender's loop for blocking transports that send in batches.
+/// `send_some(first, room, n)` sends data messages `first`, `first + 1`, ...
+/// (at least one, at most `room`, never across the end of the warm-up),
+/// sets `n` to how many and returns an error text or empty;
 /// `read_acks(block, acked)` raises `acked` from the acknowledgements that
 /// arrived, waiting up to `p.stall` for the first when `block`;
 /// `get_result(res)` asks the receiver for its figures (error text or empty).
-template <class Send, class ReadAcks, class GetResult>
-client_result run_oneway_sender(const endpoint_params& p, Send send_one,
-                                ReadAcks read_acks, GetResult get_result) {
+template <class SendSome, class ReadAcks, class GetResult>
+client_result run_oneway_batch_sender(const endpoint_params& p, SendSome send_some,
+                                      ReadAcks read_acks, GetResult get_result) {
   client_result res;
   uint32_t total = p.warmup + p.count, sent = 0, acked = 0;
   uint64_t allocs_start = 0, allocs_end = 0;
@@ -239,11 +242,16 @@ client_result run_oneway_sender(const endpoint_params& p, Send send_one,
     }
     if (sent == p.warmup)
       allocs_start = alloc_count();
-    if (auto err = send_one(sent); !err.empty()) {
+    // Never across the warm-up boundary, so the allocation count starts there.
+    uint32_t room = std::min(p.window - (sent - acked), total - sent);
+    if (sent < p.warmup)
+      room = std::min(room, p.warmup - sent);
+    uint32_t n = 0;
+    if (auto err = send_some(sent, room, n); !err.empty()) {
       res.error = err;
       return res;
     }
-    ++sent;
+    sent += n;
   }
   allocs_end = alloc_count();
   while (acked < total) {
@@ -263,6 +271,20 @@ client_result run_oneway_sender(const endpoint_params& p, Send send_one,
     res.client_allocs = static_cast<double>(allocs_end - allocs_start)
                         / static_cast<double>(p.count);
   return res;
+}
+
+/// run_oneway_batch_sender with one message per send: `send_one(seq)` sends
+/// data message `seq` and returns an error text or empty.
+template <class Send, class ReadAcks, class GetResult>
+client_result run_oneway_sender(const endpoint_params& p, Send send_one,
+                                ReadAcks read_acks, GetResult get_result) {
+  return run_oneway_batch_sender(
+    p,
+    [&send_one](uint32_t first, uint32_t, uint32_t& n) {
+      n = 1;
+      return send_one(first);
+    },
+    std::move(read_acks), std::move(get_result));
 }
 
 } // namespace herm::bench

@@ -50,41 +50,76 @@ std::string errno_text(const char* what) {
 using result_datagram = oneway_result_msg;
 using ack_datagram = oneway_ack_msg;
 
-/// oneway receiver: counts data datagrams, acknowledges to their sender,
-/// answers a done datagram with the figures.
-[[noreturn]] void udp_count(int fd, const endpoint_params& p) {
-  auto c = oneway_counter_for(p);
+/// Receives datagrams of up to 64 KiB on the blocking socket `fd` forever,
+/// calling `on(data, n, from, from_len)` for each: `n` is recvfrom's result
+/// (negative on a failed receive), `from` the sender's address.
+template <class OnDatagram>
+[[noreturn]] void for_each_datagram(int fd, OnDatagram on) {
   std::vector<uint8_t> buf(65536);
   for (;;) {
     sockaddr_in from{};
     socklen_t from_len = sizeof(from);
     auto n = ::recvfrom(fd, buf.data(), buf.size(), 0,
                         reinterpret_cast<sockaddr*>(&from), &from_len);
-    auto reply = [&](const auto& msg) {
-      ::sendto(fd, &msg, sizeof(msg), 0, reinterpret_cast<sockaddr*>(&from),
-               from_len);
-    };
-    count_payload(c, buf.data(), n, reply, reply);
+    on(buf.data(), n, reinterpret_cast<const sockaddr*>(&from), from_len);
   }
+}
+
+/// oneway receiver: counts data datagrams, acknowledges to their sender,
+/// answers a done datagram with the figures.
+[[noreturn]] void udp_count(int fd, const endpoint_params& p) {
+  auto c = oneway_counter_for(p);
+  for_each_datagram(fd, [&](const uint8_t* data, ssize_t n, const sockaddr* from,
+                            socklen_t from_len) {
+    auto reply = [&](const auto& msg) {
+      ::sendto(fd, &msg, sizeof(msg), 0, from, from_len);
+    };
+    count_payload(c, data, n, reply, reply);
+  });
 }
 
 /// oneway sender (see transport.hpp): one send per message, or batches of
 /// up to 64 with sendmmsg.
 client_result udp_oneway_client(int fd, const endpoint_params& p) {
-  client_result res;
   timeval tv{};
   tv.tv_sec = p.stall.count() / 1000;
   tv.tv_usec = (p.stall.count() % 1000) * 1000;
   ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
-  uint32_t total = p.warmup + p.count, sent = 0, acked = 0;
-  uint64_t allocs_start = 0, allocs_end = 0;
+  uint32_t sent = 0; // data datagrams sent so far
+  constexpr size_t max_batch = 64;
+  std::vector<std::vector<uint8_t>> bufs(p.batch ? max_batch : 1,
+                                         std::vector<uint8_t>(p.size));
+  std::vector<mmsghdr> msgs(max_batch);
+  std::vector<iovec> iovs(max_batch);
+  auto send_some = [&](uint32_t first, uint32_t room, uint32_t& n) -> std::string {
+    if (!p.batch) {
+      fill_payload(bufs[0], first);
+      if (::send(fd, bufs[0].data(), p.size, 0) != static_cast<ssize_t>(p.size))
+        return errno_text("udp send");
+      n = 1;
+    } else {
+      size_t k = std::min<size_t>(room, max_batch);
+      for (size_t i = 0; i < k; ++i) {
+        fill_payload(bufs[i], first + static_cast<uint32_t>(i));
+        iovs[i] = {bufs[i].data(), p.size};
+        msgs[i] = {};
+        msgs[i].msg_hdr.msg_iov = &iovs[i];
+        msgs[i].msg_hdr.msg_iovlen = 1;
+      }
+      auto m = ::sendmmsg(fd, msgs.data(), static_cast<unsigned>(k), 0);
+      if (m <= 0)
+        return errno_text("udp sendmmsg");
+      n = static_cast<uint32_t>(m);
+    }
+    sent = first + n;
+    return {};
+  };
   uint8_t in[64];
-  // Reads acknowledgements: waits (up to the stall time) only if `block`.
-  auto read_acks = [&](bool block) {
+  auto read_acks = [&](bool block, uint32_t& acked) {
     for (;;) {
       auto n = ::recv(fd, in, sizeof(in), block ? 0 : MSG_DONTWAIT);
       if (n < 0)
-        return false;
+        return;
       block = false;
       if (n == sizeof(ack_datagram) && payload_seq(in, 4) == oneway_ack) {
         ack_datagram a;
@@ -94,88 +129,27 @@ client_result udp_oneway_client(int fd, const endpoint_params& p) {
       }
     }
   };
-  constexpr size_t max_batch = 64;
-  std::vector<std::vector<uint8_t>> bufs(p.batch ? max_batch : 1,
-                                         std::vector<uint8_t>(p.size));
-  std::vector<mmsghdr> msgs(max_batch);
-  std::vector<iovec> iovs(max_batch);
-  while (sent < total) {
-    if (sent - acked >= p.window) {
-      auto before = acked;
-      read_acks(true);
-      if (acked == before) {
-        ++res.stalls; // a datagram or an acknowledgement was lost
-        acked = sent;
+  auto get_result = [&](client_result& res) -> std::string {
+    for (int tries = 0; tries < 20; ++tries) {
+      uint32_t done = oneway_done;
+      ::send(fd, &done, sizeof(done), 0);
+      uint8_t r_buf[64];
+      ssize_t n;
+      while ((n = ::recv(fd, r_buf, sizeof(r_buf), 0)) >= 0)
+        if (n == sizeof(result_datagram) && payload_seq(r_buf, 4) == oneway_result)
+          break;
+      if (n == sizeof(result_datagram)) {
+        result_datagram r;
+        std::memcpy(&r, r_buf, sizeof(r));
+        res.received = r.received;
+        res.elapsed_ns = r.elapsed_ns;
+        res.server_allocs = r.allocs;
+        return {};
       }
-      continue;
     }
-    if (sent == p.warmup)
-      allocs_start = alloc_count();
-    size_t room = std::min<size_t>(p.window - (sent - acked), total - sent);
-    if (!p.batch) {
-      fill_payload(bufs[0], sent);
-      if (::send(fd, bufs[0].data(), p.size, 0) != static_cast<ssize_t>(p.size)) {
-        res.error = errno_text("udp send");
-        return res;
-      }
-      ++sent;
-    } else {
-      // Never across the warm-up boundary, so the allocation count starts there.
-      size_t k = std::min(room, max_batch);
-      if (sent < p.warmup)
-        k = std::min<size_t>(k, p.warmup - sent);
-      for (size_t i = 0; i < k; ++i) {
-        fill_payload(bufs[i], sent + static_cast<uint32_t>(i));
-        iovs[i] = {bufs[i].data(), p.size};
-        msgs[i] = {};
-        msgs[i].msg_hdr.msg_iov = &iovs[i];
-        msgs[i].msg_hdr.msg_iovlen = 1;
-      }
-      auto n = ::sendmmsg(fd, msgs.data(), static_cast<unsigned>(k), 0);
-      if (n <= 0) {
-        res.error = errno_text("udp sendmmsg");
-        return res;
-      }
-      sent += static_cast<uint32_t>(n);
-    }
-    if (sent == total)
-      allocs_end = alloc_count();
-  }
-  // Everything acknowledged (or given up on after a stall), then the figures.
-  while (acked < total) {
-    auto before = acked;
-    read_acks(true);
-    if (acked == before) {
-      ++res.stalls;
-      break;
-    }
-  }
-  for (int tries = 0;; ++tries) {
-    if (tries == 20) {
-      res.error = "udp: no result from the receiver";
-      return res;
-    }
-    uint32_t done = oneway_done;
-    ::send(fd, &done, sizeof(done), 0);
-    uint8_t r_buf[64];
-    ssize_t n;
-    while ((n = ::recv(fd, r_buf, sizeof(r_buf), 0)) >= 0)
-      if (n == sizeof(result_datagram) && payload_seq(r_buf, 4) == oneway_result)
-        break;
-    if (n == sizeof(result_datagram)) {
-      result_datagram r;
-      std::memcpy(&r, r_buf, sizeof(r));
-      res.received = r.received;
-      res.elapsed_ns = r.elapsed_ns;
-      res.server_allocs = r.allocs;
-      break;
-    }
-  }
-  res.sent = p.count;
-  if (p.count > 0)
-    res.client_allocs = static_cast<double>(allocs_end - allocs_start)
-                        / static_cast<double>(p.count);
-  return res;
+    return "udp: no result from the receiver";
+  };
+  return run_oneway_batch_sender(p, send_some, read_acks, get_result);
 }
 
 } // namespace
@@ -192,17 +166,11 @@ int udp_server(const endpoint_params& p) {
   std::cout << "ready " << ntohs(addr.sin_port) << std::endl;
   if (p.mode == "oneway")
     udp_count(fd, p);
-  std::vector<uint8_t> buf(65536);
-  for (;;) {
-    sockaddr_in from{};
-    socklen_t from_len = sizeof(from);
-    auto n = ::recvfrom(fd, buf.data(), buf.size(), 0,
-                        reinterpret_cast<sockaddr*>(&from), &from_len);
-    if (n < 0)
-      continue;
-    ::sendto(fd, buf.data(), static_cast<size_t>(n), 0,
-             reinterpret_cast<sockaddr*>(&from), from_len);
-  }
+  for_each_datagram(fd, [fd](const uint8_t* data, ssize_t n, const sockaddr* from,
+                             socklen_t from_len) {
+    if (n >= 0)
+      ::sendto(fd, data, static_cast<size_t>(n), 0, from, from_len);
+  });
 }
 
 client_result udp_client(const endpoint_params& p) {

@@ -1,0 +1,57 @@
+// Pieces the link benchmarks (bench_can_efficiency, bench_emu_bandwidth,
+// bench_serial_goodput) share: a monotonic clock in nanoseconds, a scratch
+// directory for emulated media, and a frame handler that ignores everything.
+// Header-only; every function is safe to call from any thread.
+
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <ftw.h>
+#include <stdlib.h>
+#include <string>
+#include <time.h>
+
+#include "channels/link_driver.hpp"
+
+namespace herm::bench {
+
+/// CLOCK_MONOTONIC in nanoseconds (the clock the drivers' threads and the
+/// benchmark thread compare arrival times on).
+inline int64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+}
+
+/// Creates a fresh directory `/tmp/<prefix>-XXXXXX` (mkdtemp): its path, or
+/// an empty string when it could not be created.
+inline std::string make_temp_dir(const std::string& prefix) {
+  std::string tmpl = "/tmp/" + prefix + "-XXXXXX";
+  return ::mkdtemp(tmpl.data()) == nullptr ? std::string{} : tmpl;
+}
+
+/// Removes `root` and everything below it, depth first, never following a
+/// symbolic link; errors (an entry already gone) are ignored.
+inline void remove_tree(const std::string& root) {
+  auto remove_entry = [](const char* path, const struct stat*, int, FTW*) {
+    return ::remove(path);
+  };
+  ::nftw(root.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+}
+
+/// A frame handler that ignores every callback: the sending station's, and
+/// the base of counters that override only what they count.
+class ignoring_handler : public frame_handler {
+public:
+  void on_frame(link_addr, const uint8_t*, size_t) override {
+  }
+  void on_malformed(link_addr, const char*) override {
+  }
+  void on_event(link_event_kind, link_addr, std::string) override {
+  }
+  void on_failure(caf::error) override {
+  }
+};
+
+} // namespace herm::bench
