@@ -5,24 +5,19 @@
 
 #pragma once
 
-#include <cstdint>
 #include <cstdio>
 #include <ftw.h>
 #include <stdlib.h>
 #include <string>
-#include <time.h>
 
+#include "channels/drivers/posix.hpp"
 #include "channels/link_driver.hpp"
 
 namespace herm::bench {
 
 /// CLOCK_MONOTONIC in nanoseconds (the clock the drivers' threads and the
 /// benchmark thread compare arrival times on).
-inline int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
+using posix::now_ns;
 
 /// Creates a fresh directory `/tmp/<prefix>-XXXXXX` (mkdtemp): its path, or
 /// an empty string when it could not be created.
