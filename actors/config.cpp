@@ -421,21 +421,29 @@ public:
                        "subscription_lease_ms", "remote_entry_ttl_ms",
                        "max_pending"});
     constexpr uint64_t day = 86'400'000;
+    // Each apps.*_ms key: the member it sets and its bounds in milliseconds.
+    struct millis_key {
+      const char* key;
+      std::chrono::milliseconds app_support_config::*member;
+      uint64_t min;
+      uint64_t max;
+    };
+    static constexpr millis_key millis_keys[] = {
+      {"apps.tick_ms", &app_support_config::tick, 1, 60'000},
+      {"apps.request_timeout_ms", &app_support_config::request_timeout, 1, day},
+      {"apps.unreachable_grace_ms", &app_support_config::unreachable_grace, 0,
+       day},
+      {"apps.rebind_interval_ms", &app_support_config::rebind_interval, 1, day},
+      {"apps.watch_refresh_ms", &app_support_config::watch_refresh, 1, day},
+      {"apps.subscription_lease_ms", &app_support_config::subscription_lease,
+       3, day},
+      {"apps.remote_entry_ttl_ms", &app_support_config::remote_entry_ttl, 1,
+       day},
+    };
     auto& a = cfg.module.apps;
-    if (auto* x = find(fs, "apps.tick_ms"))
-      a.tick = millis(*x, 1, 60'000);
-    if (auto* x = find(fs, "apps.request_timeout_ms"))
-      a.request_timeout = millis(*x, 1, day);
-    if (auto* x = find(fs, "apps.unreachable_grace_ms"))
-      a.unreachable_grace = millis(*x, 0, day);
-    if (auto* x = find(fs, "apps.rebind_interval_ms"))
-      a.rebind_interval = millis(*x, 1, day);
-    if (auto* x = find(fs, "apps.watch_refresh_ms"))
-      a.watch_refresh = millis(*x, 1, day);
-    if (auto* x = find(fs, "apps.subscription_lease_ms"))
-      a.subscription_lease = millis(*x, 3, day);
-    if (auto* x = find(fs, "apps.remote_entry_ttl_ms"))
-      a.remote_entry_ttl = millis(*x, 1, day);
+    for (auto& k : millis_keys)
+      if (auto* x = find(fs, k.key))
+        a.*k.member = millis(*x, k.min, k.max);
     if (auto* x = find(fs, "apps.max_pending"))
       a.max_pending = static_cast<size_t>(integer(*x, 1, 1'000'000));
   }

@@ -321,34 +321,32 @@ protected:
   }
 
   caf::error apply_impl(std::u16string& x) override {
-    ++values_;
-    std::string raw;
-    if (auto err = read_text(limits_.max_string, "UTF-16 string", raw))
-      return err;
-    if (raw.size() % 2 != 0)
-      return fail("value " + std::to_string(values_)
-                  + ": UTF-16 string of odd byte length");
-    x.clear();
-    x.reserve(raw.size() / 2);
-    for (size_t i = 0; i < raw.size(); i += 2)
-      x.push_back(static_cast<char16_t>(
-        load_le<uint16_t>(reinterpret_cast<const uint8_t*>(raw.data() + i))));
-    return caf::none;
+    return read_units(x, "UTF-16 string", "UTF-16 string of odd byte length");
   }
 
   caf::error apply_impl(std::u32string& x) override {
+    return read_units(x, "UTF-32 string",
+                      "UTF-32 string whose byte length is not a multiple of 4");
+  }
+
+  /// Reads a string of little-endian code units of Char's width, at most
+  /// the string limit in bytes. `what` names it in errors; `bad_length` says
+  /// what is wrong when the byte length is not a multiple of the width.
+  template <class Char>
+  caf::error read_units(std::basic_string<Char>& x, const char* what,
+                        const char* bad_length) {
+    using unit = std::conditional_t<sizeof(Char) == 2, uint16_t, uint32_t>;
     ++values_;
     std::string raw;
-    if (auto err = read_text(limits_.max_string, "UTF-32 string", raw))
+    if (auto err = read_text(limits_.max_string, what, raw))
       return err;
-    if (raw.size() % 4 != 0)
-      return fail("value " + std::to_string(values_)
-                  + ": UTF-32 string whose byte length is not a multiple of 4");
+    if (raw.size() % sizeof(unit) != 0)
+      return fail("value " + std::to_string(values_) + ": " + bad_length);
     x.clear();
-    x.reserve(raw.size() / 4);
-    for (size_t i = 0; i < raw.size(); i += 4)
-      x.push_back(static_cast<char32_t>(
-        load_le<uint32_t>(reinterpret_cast<const uint8_t*>(raw.data() + i))));
+    x.reserve(raw.size() / sizeof(unit));
+    for (size_t i = 0; i < raw.size(); i += sizeof(unit))
+      x.push_back(static_cast<Char>(
+        load_le<unit>(reinterpret_cast<const uint8_t*>(raw.data() + i))));
     return caf::none;
   }
 

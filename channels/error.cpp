@@ -13,10 +13,6 @@ namespace {
 
 constexpr caf::atom_value category = caf::atom("herm");
 
-const char* name_own(uint8_t code) {
-  return to_string(static_cast<ec>(code));
-}
-
 // One namer per code. Zero-initialised before any dynamic initialisation,
 // so higher layers may add their ranges from their static initialisers;
 // written only then, read afterwards.
@@ -24,8 +20,6 @@ std::array<error_namer, 256>& namers() {
   static std::array<error_namer, 256> table{};
   return table;
 }
-
-const bool own_names_added = (add_error_names(0, ec_end, name_own), true);
 
 } // namespace
 
@@ -69,7 +63,7 @@ void add_error_names(uint8_t first, uint8_t end, error_namer namer) {
 
 const char* error_name(uint8_t code) {
   static thread_local std::string unnamed;
-  (void) own_names_added;
+  (void) detail::error_names<ec>::added;
   if (auto namer = namers()[code])
     return namer(code);
   unnamed = "code_" + std::to_string(code);

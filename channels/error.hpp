@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <string>
+#include <type_traits>
 
 #include "caf/error.hpp"
 
@@ -59,32 +60,79 @@ caf::error make_herm_error(uint8_t code, std::string context);
 /// Returns true if `err` is in the "herm" category with code `code`.
 bool is_herm_error(const caf::error& err, uint8_t code);
 
-/// Creates a `caf::error` in the "herm" category.
-inline caf::error make_error(ec x) {
-  return make_herm_error(static_cast<uint8_t>(x));
-}
-
-/// Creates a `caf::error` in the "herm" category with a context message that
-/// says what was wrong, e.g. "device 'can9': no such interface".
-inline caf::error make_error(ec x, std::string context) {
-  return make_herm_error(static_cast<uint8_t>(x), std::move(context));
-}
-
-/// Returns true if `err` is the HERM error `x`.
-inline bool is(const caf::error& err, ec x) {
-  return is_herm_error(err, static_cast<uint8_t>(x));
-}
-
 /// Names a code of the "herm" category, of whichever layer; a code no linked
 /// layer has named yields "code_<n>".
 const char* error_name(uint8_t code);
 
-/// How a higher layer names its codes for `error_name` and `render`: each
-/// layer's error.cpp adds its range once, during static initialisation.
+/// How a layer names its codes for `error_name` and `render`: each layer's
+/// names are added once, during static initialisation (see error_names).
 using error_namer = const char* (*) (uint8_t code);
 void add_error_names(uint8_t first, uint8_t end, error_namer namer);
 
 /// Renders any error, HERM's or CAF's, as "category.name: context".
 std::string render(const caf::error& err);
+
+/// The codes [first, end) of the "herm" category that a layer's error enum
+/// holds.
+struct error_range {
+  uint8_t first;
+  uint8_t end;
+};
+
+/// A layer's error enum `E` declares its range by specialising this next to
+/// the enum (and declaring `const char* to_string(E)`); that is what gives
+/// `E` the make_error() and is() below. Other types have an empty range.
+template <class E>
+inline constexpr error_range error_range_of{0, 0};
+
+template <>
+inline constexpr error_range error_range_of<ec>{0, ec_end};
+
+namespace detail {
+
+template <class E>
+using if_error_enum = std::enable_if_t<(error_range_of<E>.end > 0)>;
+
+/// Adds the names of `E`'s range for error_name() and render() when the
+/// program starts. Odr-used by make_error() and is(), so every binary that
+/// makes or tests one of E's errors adds E's names (and links to_string(E));
+/// initialised once however many translation units use it.
+template <class E>
+struct error_names {
+  static const bool added;
+};
+
+template <class E>
+const bool error_names<E>::added
+  = (add_error_names(error_range_of<E>.first, error_range_of<E>.end,
+                     [](uint8_t code) {
+                       return to_string(static_cast<E>(code));
+                     }),
+     true);
+
+} // namespace detail
+
+/// Creates a `caf::error` in the "herm" category from any layer's error
+/// enum.
+template <class E, class = detail::if_error_enum<E>>
+caf::error make_error(E x) {
+  (void) detail::error_names<E>::added;
+  return make_herm_error(static_cast<uint8_t>(x));
+}
+
+/// Creates a `caf::error` in the "herm" category with a context message that
+/// says what was wrong, e.g. "device 'can9': no such interface".
+template <class E, class = detail::if_error_enum<E>>
+caf::error make_error(E x, std::string context) {
+  (void) detail::error_names<E>::added;
+  return make_herm_error(static_cast<uint8_t>(x), std::move(context));
+}
+
+/// Returns true if `err` is the HERM error `x`, of any layer.
+template <class E, class = detail::if_error_enum<E>>
+bool is(const caf::error& err, E x) {
+  (void) detail::error_names<E>::added;
+  return is_herm_error(err, static_cast<uint8_t>(x));
+}
 
 } // namespace herm

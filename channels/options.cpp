@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <optional>
 
 #include "channels/error.hpp"
 
@@ -23,6 +24,20 @@ const std::string* take(const device_config& cfg, std::set<std::string>& used,
 std::string expects(const std::string& key, const std::string& what,
                     const std::string& text) {
   return "option '" + key + "' expects " + what + ", got '" + text + "'";
+}
+
+/// The number `parse` (strtoull- or strtod-like) reads from the whole of
+/// `text`; nullopt when the text is empty, has anything after the number,
+/// or is out of the type's range (errno set).
+template <class Parse>
+auto parse_whole(const std::string& text, Parse parse)
+  -> std::optional<decltype(parse(text.c_str(), nullptr))> {
+  errno = 0;
+  char* end = nullptr;
+  auto val = parse(text.c_str(), &end);
+  if (text.empty() || errno != 0 || *end != '\0')
+    return std::nullopt;
+  return val;
 }
 
 } // namespace
@@ -52,18 +67,17 @@ caf::expected<uint64_t> option_reader::u64(const std::string& key,
   if (found == nullptr)
     return fallback;
   auto& text = *found;
-  errno = 0;
-  char* end = nullptr;
-  auto val = text.empty() || text[0] == '-'
-               ? 0ull
-               : std::strtoull(text.c_str(), &end, 10);
-  if (text.empty() || text[0] == '-' || errno != 0 || *end != '\0' || val < min
-      || val > max)
+  auto val = !text.empty() && text[0] == '-'
+               ? std::nullopt
+               : parse_whole(text, [](const char* str, char** end) {
+                   return std::strtoull(str, end, 10);
+                 });
+  if (!val || *val < min || *val > max)
     return fail(ec::invalid_parameter,
                 expects(key, "an integer in [" + std::to_string(min) + ", "
                                + std::to_string(max) + "]",
                         text));
-  return val;
+  return *val;
 }
 
 caf::expected<double> option_reader::real(const std::string& key,
@@ -73,16 +87,15 @@ caf::expected<double> option_reader::real(const std::string& key,
   if (found == nullptr)
     return fallback;
   auto& text = *found;
-  errno = 0;
-  char* end = nullptr;
-  auto val = std::strtod(text.c_str(), &end);
-  if (text.empty() || errno != 0 || *end != '\0' || !std::isfinite(val)
-      || val < min || val > max)
+  auto val = parse_whole(text, [](const char* str, char** end) {
+    return std::strtod(str, end);
+  });
+  if (!val || !std::isfinite(*val) || *val < min || *val > max)
     return fail(ec::invalid_parameter,
                 expects(key, "a number in [" + format_double(min) + ", "
                                + format_double(max) + "]",
                         text));
-  return val;
+  return *val;
 }
 
 caf::expected<bool> option_reader::flag(const std::string& key,

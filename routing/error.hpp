@@ -18,10 +18,9 @@ constexpr uint8_t routing_ec_end = ec_end + 1;
 /// Returns the enumerator's name, e.g. "no_route".
 const char* to_string(routing_ec x);
 
-// Out of line, so that whoever makes or tests these errors links the
-// names error_name() and render() give them.
-caf::error make_error(routing_ec x);
-caf::error make_error(routing_ec x, std::string context);
-bool is(const caf::error& err, routing_ec x);
+/// This layer's codes; gives its enum make_error() and is()
+/// (channels/error.hpp).
+template <>
+inline constexpr error_range error_range_of<routing_ec>{ec_end, routing_ec_end};
 
 } // namespace herm

@@ -1,6 +1,7 @@
 #include "routing/metric.hpp"
 
 #include <string>
+#include <utility>
 
 namespace herm {
 
@@ -42,20 +43,16 @@ metric_vector link_metrics(const link_profile& p) {
 }
 
 link_code link_code_of(const std::string& name) {
-  if (name == "usb1.1")
-    return link_code::usb11;
-  if (name == "usb2.0")
-    return link_code::usb20;
-  if (name == "ieee1394a")
-    return link_code::ieee1394a;
-  if (name == "ieee1394b")
-    return link_code::ieee1394b;
-  if (name == "can2.0")
-    return link_code::can20;
-  if (name == "ethernet")
-    return link_code::ethernet;
-  if (name == "rs232c")
-    return link_code::rs232c;
+  // The link kinds' names as link profiles spell them (lower case).
+  static constexpr std::pair<const char*, link_code> codes[] = {
+    {"usb1.1", link_code::usb11},       {"usb2.0", link_code::usb20},
+    {"ieee1394a", link_code::ieee1394a}, {"ieee1394b", link_code::ieee1394b},
+    {"can2.0", link_code::can20},       {"ethernet", link_code::ethernet},
+    {"rs232c", link_code::rs232c},
+  };
+  for (auto& [text, code] : codes)
+    if (name == text)
+      return code;
   return link_code::unknown;
 }
 

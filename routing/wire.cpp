@@ -297,56 +297,24 @@ void set_authenticated(uint8_t* packet, bool on) {
 
 // -- fixed-size packets ------------------------------------------------------------
 
-void encode(const hello& x, byte_buffer& out) {
-  encode_fixed(x, out);
-}
+// Each fixed-size packet's encode() and decode_<packet>(), as wire.hpp
+// declares them: one definition per packet, through the templates above.
+#define HERM_FIXED_PACKET(T)                                                   \
+  void encode(const T& x, byte_buffer& out) {                                  \
+    encode_fixed(x, out);                                                      \
+  }                                                                            \
+  caf::expected<T> decode_##T(const uint8_t* data, size_t size) {              \
+    return decode_fixed<T>(data, size);                                        \
+  }
 
-caf::expected<hello> decode_hello(const uint8_t* data, size_t size) {
-  return decode_fixed<hello>(data, size);
-}
+HERM_FIXED_PACKET(hello)
+HERM_FIXED_PACKET(seqno_request)
+HERM_FIXED_PACKET(claim)
+HERM_FIXED_PACKET(conflict)
+HERM_FIXED_PACKET(challenge_request)
+HERM_FIXED_PACKET(challenge_reply)
 
-void encode(const seqno_request& x, byte_buffer& out) {
-  encode_fixed(x, out);
-}
-
-caf::expected<seqno_request> decode_seqno_request(const uint8_t* data,
-                                                  size_t size) {
-  return decode_fixed<seqno_request>(data, size);
-}
-
-void encode(const claim& x, byte_buffer& out) {
-  encode_fixed(x, out);
-}
-
-caf::expected<claim> decode_claim(const uint8_t* data, size_t size) {
-  return decode_fixed<claim>(data, size);
-}
-
-void encode(const conflict& x, byte_buffer& out) {
-  encode_fixed(x, out);
-}
-
-caf::expected<conflict> decode_conflict(const uint8_t* data, size_t size) {
-  return decode_fixed<conflict>(data, size);
-}
-
-void encode(const challenge_request& x, byte_buffer& out) {
-  encode_fixed(x, out);
-}
-
-caf::expected<challenge_request> decode_challenge_request(const uint8_t* data,
-                                                          size_t size) {
-  return decode_fixed<challenge_request>(data, size);
-}
-
-void encode(const challenge_reply& x, byte_buffer& out) {
-  encode_fixed(x, out);
-}
-
-caf::expected<challenge_reply> decode_challenge_reply(const uint8_t* data,
-                                                      size_t size) {
-  return decode_fixed<challenge_reply>(data, size);
-}
+#undef HERM_FIXED_PACKET
 
 // -- update ----------------------------------------------------------------------
 

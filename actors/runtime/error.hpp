@@ -31,10 +31,10 @@ constexpr uint8_t app_ec_end = static_cast<uint8_t>(app_ec::unavailable) + 1;
 /// Returns the enumerator's name, e.g. "apo_gone".
 const char* to_string(app_ec x);
 
-// Out of line, so that whoever makes or tests these errors links the
-// names error_name() and render() give them.
-caf::error make_error(app_ec x);
-caf::error make_error(app_ec x, std::string context);
-bool is(const caf::error& err, app_ec x);
+/// This layer's codes; gives its enum make_error() and is()
+/// (channels/error.hpp).
+template <>
+inline constexpr error_range error_range_of<app_ec>{routing_ec_end,
+                                                  app_ec_end};
 
 } // namespace herm
