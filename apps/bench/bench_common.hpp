@@ -5,6 +5,8 @@
 
 #pragma once
 
+#include <atomic>
+#include <cstdint>
 #include <cstdio>
 #include <ftw.h>
 #include <stdlib.h>
@@ -47,6 +49,30 @@ public:
   }
   void on_failure(caf::error) override {
   }
+};
+
+/// The base of the receiving side's counters: ignores link events, counts
+/// malformed frames and remembers a device failure. Written by the driver's
+/// thread, read by the benchmark thread (atomics).
+class trouble_counting_handler : public ignoring_handler {
+public:
+  void on_malformed(link_addr, const char*) override {
+    malformed_.fetch_add(1);
+  }
+
+  void on_failure(caf::error) override {
+    failed_.store(true);
+  }
+
+  /// Malformed frames so far, plus 1 once the device failed: 0 while all is
+  /// well.
+  uint64_t trouble() const {
+    return malformed_.load() + (failed_.load() ? 1 : 0);
+  }
+
+private:
+  std::atomic<uint64_t> malformed_{0};
+  std::atomic<bool> failed_{false};
 };
 
 } // namespace herm::bench

@@ -58,7 +58,7 @@ using bench::now_ns;
 /// Receiving side: feeds frames into a port stack and counts what comes
 /// out. Called by the receiving driver's thread only; read by the
 /// benchmark thread through atomics.
-class packet_counter : public bench::ignoring_handler {
+class packet_counter : public bench::trouble_counting_handler {
 public:
   explicit packet_counter(std::unique_ptr<packet_port> port)
     : port_(std::move(port)) {
@@ -81,14 +81,6 @@ public:
     }
   }
 
-  void on_malformed(link_addr, const char*) override {
-    failed_.store(true);
-  }
-
-  void on_failure(caf::error) override {
-    failed_.store(true);
-  }
-
   uint64_t frames() const {
     return frames_.load();
   }
@@ -102,7 +94,7 @@ public:
     return last_ns_.load();
   }
   bool failed() const {
-    return failed_.load();
+    return trouble() > 0;
   }
 
 private:
@@ -112,7 +104,6 @@ private:
   std::atomic<uint64_t> packets_{0};
   std::atomic<uint64_t> bytes_{0};
   std::atomic<int64_t> last_ns_{0};
-  std::atomic<bool> failed_{false};
 };
 
 void can_efficiency(benchmark::State& state, const char* id_format,

@@ -46,7 +46,7 @@ using bench::now_ns;
 
 /// Counts frames and remembers when the first and the last arrived. Called
 /// by the receiving driver's thread only; read by the benchmark thread.
-class arrival_counter : public bench::ignoring_handler {
+class arrival_counter : public bench::trouble_counting_handler {
 public:
   void reset() {
     count_.store(0);
@@ -62,14 +62,6 @@ public:
     count_.fetch_add(1, std::memory_order_release);
   }
 
-  void on_malformed(link_addr, const char*) override {
-    malformed_.fetch_add(1);
-  }
-
-  void on_failure(caf::error) override {
-    failed_.store(true);
-  }
-
   uint64_t count() const {
     return count_.load(std::memory_order_acquire);
   }
@@ -80,15 +72,13 @@ public:
     return last_ns_.load(std::memory_order_relaxed);
   }
   bool failed() const {
-    return failed_.load() || malformed_.load() > 0;
+    return trouble() > 0;
   }
 
 private:
   std::atomic<uint64_t> count_{0};
   std::atomic<int64_t> first_ns_{0};
   std::atomic<int64_t> last_ns_{0};
-  std::atomic<uint64_t> malformed_{0};
-  std::atomic<bool> failed_{false};
 };
 
 void emu_bandwidth(benchmark::State& state, const char* profile,

@@ -61,7 +61,7 @@ byte_buffer make_payload(size_t size) {
 }
 
 /// Reassembles on the receiving driver's IO thread; counted from outside.
-class packet_counter : public bench::ignoring_handler {
+class packet_counter : public bench::trouble_counting_handler {
 public:
   packet_counter(std::unique_ptr<packet_port> port, byte_buffer expected)
     : port_(std::move(port)), expected_(std::move(expected)) {
@@ -78,14 +78,6 @@ public:
     packets_.fetch_add(1, std::memory_order_release);
   }
 
-  void on_malformed(link_addr, const char*) override {
-    malformed_.fetch_add(1);
-  }
-
-  void on_failure(caf::error) override {
-    failed_.store(true);
-  }
-
   uint64_t packets() const {
     return packets_.load(std::memory_order_acquire);
   }
@@ -95,8 +87,9 @@ public:
   clock_type::time_point last() const {
     return clock_type::time_point{clock_type::duration{last_.load()}};
   }
+  /// Altered packets, malformed frames, plus 1 once the device failed.
   uint64_t trouble() const {
-    return altered_.load() + malformed_.load() + (failed_.load() ? 1 : 0);
+    return altered_.load() + trouble_counting_handler::trouble();
   }
 
 private:
@@ -107,8 +100,6 @@ private:
   std::atomic<uint64_t> bytes_{0};
   std::atomic<clock_type::rep> last_{0};
   std::atomic<uint64_t> altered_{0};
-  std::atomic<uint64_t> malformed_{0};
-  std::atomic<bool> failed_{false};
 };
 
 void serial_goodput(benchmark::State& state) {
