@@ -21,21 +21,38 @@ namespace herm::bench {
 /// benchmark thread compare arrival times on).
 using posix::now_ns;
 
-/// Creates a fresh directory `/tmp/<prefix>-XXXXXX` (mkdtemp): its path, or
-/// an empty string when it could not be created.
-inline std::string make_temp_dir(const std::string& prefix) {
-  std::string tmpl = "/tmp/" + prefix + "-XXXXXX";
-  return ::mkdtemp(tmpl.data()) == nullptr ? std::string{} : tmpl;
-}
+/// A fresh directory `/tmp/<prefix>-XXXXXX` (mkdtemp) for an emulated
+/// medium, removed with everything below it (depth first, never following a
+/// symbolic link, errors ignored) when this goes away. Declare it before the
+/// drivers that use it, so they close first. Not copyable.
+class scratch_dir {
+public:
+  explicit scratch_dir(const std::string& prefix)
+    : path_("/tmp/" + prefix + "-XXXXXX") {
+    if (::mkdtemp(path_.data()) == nullptr)
+      path_.clear();
+  }
 
-/// Removes `root` and everything below it, depth first, never following a
-/// symbolic link; errors (an entry already gone) are ignored.
-inline void remove_tree(const std::string& root) {
-  auto remove_entry = [](const char* path, const struct stat*, int, FTW*) {
-    return ::remove(path);
-  };
-  ::nftw(root.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS);
-}
+  scratch_dir(const scratch_dir&) = delete;
+  scratch_dir& operator=(const scratch_dir&) = delete;
+
+  ~scratch_dir() {
+    if (path_.empty())
+      return;
+    auto remove_entry = [](const char* path, const struct stat*, int, FTW*) {
+      return ::remove(path);
+    };
+    ::nftw(path_.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+  }
+
+  /// The directory, or empty when mkdtemp failed.
+  const std::string& path() const {
+    return path_;
+  }
+
+private:
+  std::string path_;
+};
 
 /// A frame handler that ignores every callback: the sending station's, and
 /// the base of counters that override only what they count.

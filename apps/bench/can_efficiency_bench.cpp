@@ -111,12 +111,12 @@ void can_efficiency(benchmark::State& state, const char* id_format,
   auto packet_size = static_cast<size_t>(state.range(0));
   // About half a second of bus time per iteration.
   auto packets = static_cast<uint64_t>(state.range(1));
-  auto root = bench::make_temp_dir("herm-can-bench");
-  if (root.empty()) {
+  bench::scratch_dir dir{"herm-can-bench"};
+  if (dir.path().empty()) {
     state.SkipWithError("mkdtemp failed");
     return;
   }
-  auto cleanup = [&] { bench::remove_tree(root); };
+  const auto& root = dir.path();
   auto* kind = find_link_kind("can");
   option_map common{{"id_format", id_format},
                     {"stuffing", stuffing ? "true" : "false"},
@@ -130,7 +130,6 @@ void can_efficiency(benchmark::State& state, const char* id_format,
   auto rx = tx ? kind->open(device_config{"rx0", "can", bus, rx_opts}) : tx;
   if (!tx || !rx) {
     state.SkipWithError(render(tx ? rx.error() : tx.error()).c_str());
-    cleanup();
     return;
   }
   auto rx_port = make_port(*rx, reassembly_limits{});
@@ -149,7 +148,6 @@ void can_efficiency(benchmark::State& state, const char* id_format,
   auto tx_port = make_port(*tx, reassembly_limits{}, writer);
   if (!rx_port || !tx_port) {
     state.SkipWithError("make_port failed");
-    cleanup();
     return;
   }
   auto counter = std::make_shared<packet_counter>(std::move(*rx_port));
@@ -196,7 +194,6 @@ void can_efficiency(benchmark::State& state, const char* id_format,
   }
   (*tx)->stop();
   (*rx)->stop();
-  cleanup();
   if (frames == 0 || seconds <= 0)
     return;
   // Exact bus bits of one packet: its frames, replayed through a fragmenter.

@@ -83,12 +83,12 @@ private:
 
 void emu_bandwidth(benchmark::State& state, const char* profile,
                    double burst_seconds, const char* bandwidth = nullptr) {
-  auto root = bench::make_temp_dir("herm-emu-bench");
-  if (root.empty()) {
+  bench::scratch_dir dir{"herm-emu-bench"};
+  if (dir.path().empty()) {
     state.SkipWithError("mkdtemp failed");
     return;
   }
-  auto cleanup = [&] { bench::remove_tree(root); };
+  const auto& root = dir.path();
   auto* kind = find_link_kind("emu");
   device_config tx_cfg{"tx0", "emu", root + "/medium",
                        {{"profile", profile}, {"station", "1"}}};
@@ -102,7 +102,6 @@ void emu_bandwidth(benchmark::State& state, const char* profile,
   auto rx = tx ? kind->open(rx_cfg) : tx;
   if (!tx || !rx) {
     state.SkipWithError(render(tx ? rx.error() : tx.error()).c_str());
-    cleanup();
     return;
   }
   auto counter = std::make_shared<arrival_counter>();
@@ -159,7 +158,6 @@ void emu_bandwidth(benchmark::State& state, const char* profile,
   }
   (*tx)->stop();
   (*rx)->stop();
-  cleanup();
   if (seconds <= 0)
     return;
   auto delivered = bits / seconds;
