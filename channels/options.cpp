@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <optional>
+#include <type_traits>
 
 #include "channels/error.hpp"
 
@@ -28,7 +29,7 @@ std::string expects(const std::string& key, const std::string& what,
 
 /// The number `parse` (strtoull- or strtod-like) reads from the whole of
 /// `text`; nullopt when the text is empty, has anything after the number,
-/// or is out of the type's range (errno set).
+/// is out of the type's range (errno set) or is not finite.
 template <class Parse>
 auto parse_whole(const std::string& text, Parse parse)
   -> std::optional<decltype(parse(text.c_str(), nullptr))> {
@@ -37,7 +38,30 @@ auto parse_whole(const std::string& text, Parse parse)
   auto val = parse(text.c_str(), &end);
   if (text.empty() || errno != 0 || *end != '\0')
     return std::nullopt;
+  if constexpr (std::is_floating_point_v<decltype(val)>)
+    if (!std::isfinite(val))
+      return std::nullopt;
   return val;
+}
+
+/// A number option: `fallback` when absent (`found` null), else its text
+/// parsed by `parse` when within [min, max], else an error of `reader` that
+/// says it expects `kind` in that range (bounds written by `format`).
+template <class T, class Parse, class Format>
+caf::expected<T> read_number(const option_reader& reader,
+                             const std::string* found, const std::string& key,
+                             T fallback, T min, T max, Parse parse,
+                             const char* kind, Format format) {
+  if (found == nullptr)
+    return fallback;
+  auto val = parse_whole(*found, parse);
+  if (val && *val >= min && *val <= max)
+    return *val;
+  return reader.fail(ec::invalid_parameter,
+                     expects(key,
+                             std::string{kind} + " in [" + format(min) + ", "
+                               + format(max) + "]",
+                             *found));
 }
 
 } // namespace
@@ -63,39 +87,27 @@ caf::error option_reader::fail(ec code, const std::string& what) const {
 caf::expected<uint64_t> option_reader::u64(const std::string& key,
                                            uint64_t fallback, uint64_t min,
                                            uint64_t max) {
-  auto* found = take(cfg_, used_, key);
-  if (found == nullptr)
-    return fallback;
-  auto& text = *found;
-  auto val = !text.empty() && text[0] == '-'
-               ? std::nullopt
-               : parse_whole(text, [](const char* str, char** end) {
-                   return std::strtoull(str, end, 10);
-                 });
-  if (!val || *val < min || *val > max)
-    return fail(ec::invalid_parameter,
-                expects(key, "an integer in [" + std::to_string(min) + ", "
-                               + std::to_string(max) + "]",
-                        text));
-  return *val;
+  auto parse = [](const char* str, char** end) {
+    // strtoull would wrap a negative number around: refuse the sign.
+    if (*str == '-') {
+      *end = const_cast<char*>(str);
+      return 0ull;
+    }
+    return std::strtoull(str, end, 10);
+  };
+  auto format = [](uint64_t x) { return std::to_string(x); };
+  return read_number(*this, take(cfg_, used_, key), key, fallback, min, max,
+                     parse, "an integer", format);
 }
 
 caf::expected<double> option_reader::real(const std::string& key,
                                           double fallback, double min,
                                           double max) {
-  auto* found = take(cfg_, used_, key);
-  if (found == nullptr)
-    return fallback;
-  auto& text = *found;
-  auto val = parse_whole(text, [](const char* str, char** end) {
+  auto parse = [](const char* str, char** end) {
     return std::strtod(str, end);
-  });
-  if (!val || !std::isfinite(*val) || *val < min || *val > max)
-    return fail(ec::invalid_parameter,
-                expects(key, "a number in [" + format_double(min) + ", "
-                               + format_double(max) + "]",
-                        text));
-  return *val;
+  };
+  return read_number(*this, take(cfg_, used_, key), key, fallback, min, max,
+                     parse, "a number", format_double);
 }
 
 caf::expected<bool> option_reader::flag(const std::string& key,

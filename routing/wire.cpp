@@ -92,6 +92,18 @@ caf::error check_head(packet_type t, const uint8_t* data, size_t size) {
   return caf::none;
 }
 
+/// check_head, then that a variable-size packet holds its `head_size`-byte
+/// header.
+caf::error check_header(packet_type t, const uint8_t* data, size_t size,
+                        size_t head_size) {
+  if (auto err = check_head(t, data, size))
+    return err;
+  if (size < head_size)
+    return bad(t, "truncated header: " + num(size) + " of " + num(head_size)
+                    + " bytes");
+  return caf::none;
+}
+
 /// Checks that a fixed-size packet has exactly `expected` bytes.
 caf::error check_exact(packet_type t, size_t size, size_t expected) {
   if (size < expected)
@@ -254,11 +266,8 @@ void encode(const data_header& h, byte_buffer& out) {
 caf::expected<data_header> decode_data_header(const uint8_t* data,
                                               size_t size) {
   constexpr auto t = packet_type::data;
-  if (auto err = check_head(t, data, size))
+  if (auto err = check_header(t, data, size, data_header_size))
     return err;
-  if (size < data_header_size)
-    return bad(t, "truncated header: " + num(size) + " of "
-                    + num(data_header_size) + " bytes");
   le_reader r{data, size, 1};
   data_header h;
   h.src = r.u16();
@@ -345,11 +354,8 @@ void encode(const update& x, byte_buffer& out) {
 
 caf::expected<update> decode_update(const uint8_t* data, size_t size) {
   constexpr auto t = packet_type::update;
-  if (auto err = check_head(t, data, size))
+  if (auto err = check_header(t, data, size, update_head_size))
     return err;
-  if (size < update_head_size)
-    return bad(t, "truncated header: " + num(size) + " of "
-                    + num(update_head_size) + " bytes");
   le_reader r{data, size, 1};
   update x;
   x.sender = r.u16();
