@@ -326,17 +326,24 @@ int main(int argc, char** argv) {
   app.add_option("--modes", modes_arg, "modes to run, comma-separated: back-to-back,gap,oneway,inprocess,router (default: all)");
   app.add_option("--sizes", sizes_arg, "payload sizes in bytes of every mode (latency modes: 16,256,1400; oneway: 64)");
   app.add_option("--policies", policies_arg, "CAF schedulers for herm and caf, POLICY[:THREADS] (sharing:1,sharing,stealing; sharing:1 = one worker, sharing = one per core)");
-  app.add_option("--count", count, "measured round trips back to back, inprocess and router (2000)");
-  app.add_option("--warmup", warmup, "unmeasured round trips before them (200)");
-  app.add_option("--gap-count", gap_count, "measured round trips with a gap (300)");
-  app.add_option("--gap-warmup", gap_warmup, "unmeasured ones before them (20)");
-  app.add_option("--gap-ms", gap_ms, "the gap after each reply, ms (10)");
-  app.add_option("--oneway-count", oneway_count, "oneway: measured messages per run (20000)");
-  app.add_option("--oneway-warmup", oneway_warmup, "oneway: unmeasured messages before them (1000)");
-  app.add_option("--window", ep.window, "oneway: most unacknowledged messages (128)");
-  app.add_option("--ack-every", ep.ack_every, "oneway: the receiver acknowledges every N messages (16)");
-  app.add_option("--stall-ms", stall_ms, "oneway: a window full for this long is reopened and counted as a stall (100)");
-  app.add_option("--repeat", repeat, "repetitions of every case (3)");
+  struct count_option {
+    const char* name;
+    uint32_t* value;
+    const char* help;
+  };
+  for (const auto& o : {
+         count_option{"--count", &count, "measured round trips back to back, inprocess and router (2000)"},
+         count_option{"--warmup", &warmup, "unmeasured round trips before them (200)"},
+         count_option{"--gap-count", &gap_count, "measured round trips with a gap (300)"},
+         count_option{"--gap-warmup", &gap_warmup, "unmeasured ones before them (20)"},
+         count_option{"--gap-ms", &gap_ms, "the gap after each reply, ms (10)"},
+         count_option{"--oneway-count", &oneway_count, "oneway: measured messages per run (20000)"},
+         count_option{"--oneway-warmup", &oneway_warmup, "oneway: unmeasured messages before them (1000)"},
+         count_option{"--window", &ep.window, "oneway: most unacknowledged messages (128)"},
+         count_option{"--ack-every", &ep.ack_every, "oneway: the receiver acknowledges every N messages (16)"},
+         count_option{"--stall-ms", &stall_ms, "oneway: a window full for this long is reopened and counted as a stall (100)"},
+         count_option{"--repeat", &repeat, "repetitions of every case (3)"}})
+    app.add_option(o.name, *o.value, o.help);
   app.add_option("--json", json_path, "write every figure to this file");
   app.add_flag("--quick", quick, "a short smoke run: 256 bytes (oneway 64), 1 repetition, few round trips, 100 ms hellos");
   app.add_option("--hello-ms", hello_ms, "herm: routing hello interval, ms (1000, HERM's default)");
