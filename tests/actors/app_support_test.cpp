@@ -23,13 +23,6 @@ using namespace std::chrono_literals;
 
 namespace {
 
-std::string test_prefix() {
-  auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string name = std::string{info->test_suite_name()} + "-" + info->name();
-  std::replace(name.begin(), name.end(), '/', '-');
-  return name;
-}
-
 module_id id_of(size_t i) {
   return static_cast<module_id>(0x10 + i);
 }

@@ -74,13 +74,6 @@ challenge_nonce nonce_of(const byte_buffer& signed_packet) {
   return n;
 }
 
-std::string test_prefix() {
-  auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string name = std::string{info->test_suite_name()} + "-" + info->name();
-  std::replace(name.begin(), name.end(), '/', '-');
-  return name;
-}
-
 class auth_sim : public actor_fixture {
 public:
   static void give(sim_network& net, size_t i, intruder kind) {

@@ -18,13 +18,6 @@ using namespace std::chrono_literals;
 
 namespace {
 
-std::string test_prefix() {
-  auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string name = std::string{info->test_suite_name()} + "-" + info->name();
-  std::replace(name.begin(), name.end(), '/', '-');
-  return name;
-}
-
 template <class T>
 byte_buffer encoded(const T& packet) {
   byte_buffer b;

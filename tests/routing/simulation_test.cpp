@@ -20,13 +20,6 @@ using namespace std::chrono_literals;
 
 namespace {
 
-std::string test_prefix() {
-  auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string name = std::string{info->test_suite_name()} + "-" + info->name();
-  std::replace(name.begin(), name.end(), '/', '-');
-  return name;
-}
-
 class routing_sim : public actor_fixture {
 public:
   sim_network build(const topology& t) {
