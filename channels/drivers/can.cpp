@@ -199,16 +199,14 @@ public:
 
   void stop() override {
     std::lock_guard<std::mutex> guard{life_mtx_};
-    if (state_ == state::stopped)
+    if (state_ == state::stopped && !thread_.joinable())
       return;
     state_ = state::stopped;
     stopping_.store(true);
-    if (!posix::wake_and_join(thread_, wake_fd_.get())) {
-      // Called from a handler: the loop ends after this callback and
-      // still uses the descriptors, so leave them open until destruction.
-      thread_.detach();
+    // From a handler the loop ends once the callback returns and still uses
+    // the descriptors: the next stop() or the destructor joins and closes.
+    if (!posix::wake_and_join(thread_, wake_fd_.get()))
       return;
-    }
     handler_.reset();
     std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
     fd_.reset();

@@ -182,25 +182,27 @@ public:
 
   void stop() override {
     std::lock_guard<std::mutex> guard{life_mtx_};
-    if (stopped_)
+    if (left_)
       return;
-    stopped_ = true;
-    gate_.close();
-    station_.request_stop();
-    if (tx_thread_.joinable())
-      tx_thread_.join();
-    // Called from a handler, the receive thread is detached: the loop ends
-    // after this callback; the receive socket and the handler stay until
-    // destruction.
-    auto detached = station_.join_receiver(rx_thread_);
-    if (station_.state() != nullptr) {
-      auto& me = bus().slots[cfg_.node];
-      me.pending.store(0);
-      me.heartbeat.store(0);
+    if (!stopped_) {
+      stopped_ = true;
+      gate_.close();
+      station_.request_stop();
+      if (tx_thread_.joinable())
+        tx_thread_.join();
+      if (station_.state() != nullptr) {
+        auto& me = bus().slots[cfg_.node];
+        me.pending.store(0);
+        me.heartbeat.store(0);
+      }
     }
-    station_.leave(detached);
-    if (!detached)
-      handler_.reset();
+    // From a handler callback the receive loop ends once the callback
+    // returns; the next stop() or the destructor joins it and leaves.
+    if (!station_.join_receiver(rx_thread_))
+      return;
+    station_.leave();
+    handler_.reset();
+    left_ = true;
   }
 
 
@@ -517,7 +519,8 @@ private:
 
   // Lifecycle.
   std::mutex life_mtx_;
-  bool stopped_ = false;
+  bool stopped_ = false; // no sending, no (re)start
+  bool left_ = false;    // both threads joined, sockets closed
   std::shared_ptr<frame_handler> handler_;
   std::thread tx_thread_;
   std::thread rx_thread_;

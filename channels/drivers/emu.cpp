@@ -225,16 +225,21 @@ public:
 
   void stop() override {
     std::lock_guard<std::mutex> guard{lifecycle_mtx_};
-    if (stopped_)
+    if (left_)
       return;
-    stopped_ = true;
-    gate_.close();
-    station_.request_stop();
-    if (tx_thread_.joinable())
-      tx_thread_.join();
-    // Stop from a handler callback (the handler contract forbids blocking
-    // calls there) must not deadlock: the receive thread is detached then.
-    station_.leave(station_.join_receiver(rx_thread_));
+    if (!stopped_) {
+      stopped_ = true;
+      gate_.close();
+      station_.request_stop();
+      if (tx_thread_.joinable())
+        tx_thread_.join();
+    }
+    // From a handler callback the receive loop ends once the callback
+    // returns; the next stop() or the destructor joins it and leaves.
+    if (!station_.join_receiver(rx_thread_))
+      return;
+    station_.leave();
+    left_ = true;
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -558,7 +563,8 @@ private:
 
   // Lifecycle.
   std::mutex lifecycle_mtx_;
-  bool stopped_ = false;
+  bool stopped_ = false; // no sending, no (re)start
+  bool left_ = false;    // both threads joined, sockets closed
   std::shared_ptr<frame_handler> handler_;
   std::thread tx_thread_;
   std::thread rx_thread_;

@@ -508,16 +508,14 @@ void station::request_stop() {
 
 bool station::join_receiver(std::thread& rx) {
   if (!rx.joinable())
-    return false;
-  if (rx.get_id() == std::this_thread::get_id()) {
-    rx.detach();
     return true;
-  }
+  if (rx.get_id() == std::this_thread::get_id())
+    return false;
   rx.join();
-  return false;
+  return true;
 }
 
-void station::leave(bool rx_running) {
+void station::leave() {
   // Remove our socket file, unless somebody else's replaced it.
   struct stat st;
   if (sock_ino_ != 0 && ::stat(sock_path_.c_str(), &st) == 0
@@ -525,8 +523,7 @@ void station::leave(bool rx_running) {
     ::unlink(sock_path_.c_str());
   if (state_ != nullptr)
     generation().fetch_add(1);
-  if (!rx_running)
-    rx_fd_.reset();
+  rx_fd_.reset();
   tx_fd_.reset();
 }
 

@@ -491,18 +491,17 @@ public:
   // -- life cycle ---------------------------------------------------------------
 
   /// Waits for the thread `rx` running receive_loop to end, after
-  /// request_stop. Called on `rx` itself (stop from a handler callback,
-  /// which would join the thread with itself) it detaches `rx` instead and
-  /// returns true: the loop ends when the callback returns, touching neither
-  /// the client nor the receive socket again.
+  /// request_stop, and returns true; true at once when `rx` never started.
+  /// Called on `rx` itself (stop from a handler callback, which would join
+  /// the thread with itself) it returns false and does nothing: the loop
+  /// ends once the callback returns, and the driver must call again from
+  /// another thread (a second stop() or its destructor) before leave().
   static bool join_receiver(std::thread& rx);
 
-  /// Leaves the medium once the transmit thread has ended and the receive
-  /// thread has ended or, when `rx_running` (stop from a handler), will end
-  /// without touching the receive socket again: removes our socket file
-  /// (unless somebody else's replaced it), tells transmitters, closes the
-  /// transmit socket (and the receive socket unless `rx_running`).
-  void leave(bool rx_running);
+  /// Leaves the medium once the transmit and receive threads have ended:
+  /// removes our socket file (unless somebody else's replaced it), tells
+  /// transmitters, closes both sockets.
+  void leave();
 
 private:
   caf::error open_directory(bool create);

@@ -94,8 +94,8 @@ start_thread(std::thread& thread, const char* what, F&& body) {
 /// until the loop notices. Returns false, doing nothing, when called on
 /// `thread` itself (stop() from a frame handler): that loop ends once the
 /// callback returns and still uses its descriptors, so the caller must leave
-/// them open (and join or detach `thread` later). True otherwise, including
-/// when `thread` never started.
+/// them open and join `thread` later (a second stop or the destructor). True
+/// otherwise, including when `thread` never started.
 inline bool wake_and_join(std::thread& thread, int wake_fd) {
   if (!thread.joinable())
     return true;
