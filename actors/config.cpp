@@ -362,7 +362,7 @@ public:
     auto fs = entries(f.value, f.path, f.key_line, "a map",
                       {"policy", "threads"});
     if (auto* x = find(fs, "scheduler.policy"))
-      cfg.scheduler = choice(*x, {"sharing", "stealing"});
+      cfg.scheduler = choice(*x, {"loop", "sharing", "stealing"});
     if (auto* x = find(fs, "scheduler.threads"))
       cfg.threads = static_cast<size_t>(integer(*x, 0, 256));
   }

@@ -51,10 +51,10 @@ struct file_config {
   std::string log_level = "info";
   /// text (human-readable, default) or json (one object per line).
   std::string log_format = "text";
-  /// "sharing" (default) or "stealing"; see herm::configure.
-  std::string scheduler = "sharing";
-  /// Worker threads; 0: one per core (CAF's default). One by default, see
-  /// configure() in actors/runtime/system.hpp.
+  /// "loop" (default), "sharing" or "stealing"; see herm::configure.
+  std::string scheduler = "loop";
+  /// Worker threads of "sharing" and "stealing"; 0: one per core (CAF's
+  /// default). One by default, see configure() in actors/runtime/system.hpp.
   size_t threads = 1;
   /// Path of the local control socket; empty: none.
   std::string control_socket;

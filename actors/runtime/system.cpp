@@ -4,6 +4,7 @@
 #include "caf/atom.hpp"
 
 #include "actors/runtime/error.hpp"
+#include "actors/runtime/loop_scheduler.hpp"
 #include "actors/runtime/type_ids.hpp"
 
 namespace herm {
@@ -34,8 +35,10 @@ void configure(caf::actor_system_config& cfg,
   register_types(cfg);
   if (scheduler_policy == "stealing")
     cfg.set("scheduler.policy", caf::atom("stealing"));
-  else
+  else if (scheduler_policy == "sharing")
     cfg.set("scheduler.policy", caf::atom("sharing"));
+  else
+    load_loop_scheduler(cfg);
   if (threads > 0)
     cfg.set("scheduler.max-threads", threads);
   cfg.set("logger.verbosity", caf::atom("quiet"));

@@ -11,17 +11,16 @@ namespace herm {
 /// type-ID blocks (one per layer) and the "herm" error category, and
 /// selects the scheduler.
 ///
-/// `scheduler_policy` is "sharing" (default: one shared queue, about 12 us
-/// per cross-thread wake-up on small machines) or "stealing" (CAF's default,
-/// about 100 us here); see docs/performance.md. `threads` is the number of
-/// worker threads; 0 means CAF's default, one per core. One worker is the
-/// default: every hand-off between HERM's actors then stays on one thread
-/// instead of waking another (a request round trip over udp takes about
-/// half the time it takes with one worker per core; docs/performance.md).
-/// Spawn long computations as detached actors, or give the module more
-/// workers.
+/// `scheduler_policy` is "loop" (default: the loop scheduler of
+/// actors/runtime/loop_scheduler.hpp, one thread that runs every actor and
+/// the event loop of every driver, so a packet reaches its APO on the thread
+/// the kernel woke), "sharing" (CAF's one shared queue) or "stealing" (CAF's
+/// default, about 100 us per cross-thread wake-up here); see
+/// docs/performance.md. `threads` is the number of worker threads of
+/// "sharing" and "stealing" (0: one per core); the loop scheduler has one.
+/// On any of them, spawn blocking work as detached actors.
 void configure(caf::actor_system_config& cfg,
-               const std::string& scheduler_policy = "sharing",
+               const std::string& scheduler_policy = "loop",
                size_t threads = 1);
 
 /// Like `configure`, but for deterministic tests: CAF's test_coordinator

@@ -64,7 +64,7 @@ struct options {
   std::string interface;
   std::vector<std::string> opts;
   std::string address = "*";
-  std::string scheduler = "sharing";
+  std::string scheduler = "loop";
   uint32_t count = 0;
   uint32_t min_size = 0;
   uint32_t max_size = 64;
@@ -89,7 +89,7 @@ int main(int argc, char** argv) {
   app.add_option("-o,--option", o.opts, "device option KEY=VALUE (repeatable)");
   app.add_option("-a,--address", o.address,
                  "channel address: * for every peer, or one peer's address");
-  app.add_option("--scheduler", o.scheduler, "sharing or stealing");
+  app.add_option("--scheduler", o.scheduler, "loop, sharing or stealing");
   app.add_option("--timeout", o.timeout, "seconds to wait for traffic");
   auto* echo = app.add_subcommand("echo", "send every packet back to its sender");
   echo->add_option("--count", o.count, "stop after N packets (0: run until SIGTERM)");

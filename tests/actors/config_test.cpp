@@ -407,7 +407,7 @@ TEST(config, fills_everything_but_the_name_with_defaults) {
   EXPECT_EQ(a.max_pending, a0.max_pending);
   EXPECT_EQ(cfg.log_level, "info");
   EXPECT_EQ(cfg.log_format, "text");
-  EXPECT_EQ(cfg.scheduler, "sharing");
+  EXPECT_EQ(cfg.scheduler, "loop");
   EXPECT_EQ(cfg.threads, 1u);
   EXPECT_EQ(cfg.control_socket, default_control_socket("m"));
   EXPECT_TRUE(cfg.module.devices.empty());
@@ -419,7 +419,7 @@ TEST(config, takes_empty_sections_as_all_defaults) {
   auto cfg = parse_ok(lines({"module:", "  name: m", "log:", "scheduler:",
                              "apps:", "channels:", "apos: []"}));
   EXPECT_EQ(cfg.log_level, "info");
-  EXPECT_EQ(cfg.scheduler, "sharing");
+  EXPECT_EQ(cfg.scheduler, "loop");
   EXPECT_EQ(cfg.control_socket, default_control_socket("m"));
   EXPECT_TRUE(cfg.module.devices.empty());
   EXPECT_TRUE(cfg.apos.empty());
@@ -578,7 +578,7 @@ const error_case error_cases[] = {
    "robot.yaml:2: log.levle: unknown key (expected level or format)"},
   {"bad_scheduler_policy",
    lines({"module: { name: m }", "scheduler: { policy: fifo }"}),
-   "robot.yaml:2: scheduler.policy: expected sharing or stealing, got "
+   "robot.yaml:2: scheduler.policy: expected loop, sharing or stealing, got "
    "'fifo'"},
   {"too_many_threads",
    lines({"module: { name: m }", "scheduler:", "  threads: 257"}),

@@ -1,0 +1,288 @@
+#include "actors/runtime/loop_scheduler.hpp"
+
+#include <pthread.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <deque>
+#include <limits>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "caf/actor_system.hpp"
+#include "caf/actor_system_config.hpp"
+#include "caf/detail/simple_actor_clock.hpp"
+#include "caf/execution_unit.hpp"
+#include "caf/resumable.hpp"
+#include "caf/scheduler/abstract_coordinator.hpp"
+
+#include "channels/error.hpp"
+#include "channels/event_loop.hpp"
+
+namespace herm {
+
+namespace {
+
+/// CAF's simple clock behind a mutex. The loop thread asks it for the next
+/// due time before it sleeps and fires what is due after each wait; another
+/// thread that sets a timeout wakes the loop so it recomputes its wait.
+class loop_clock final : public caf::detail::simple_actor_clock {
+public:
+  using super = caf::detail::simple_actor_clock;
+
+  explicit loop_clock(event_loop& loop) : loop_(loop) {
+  }
+
+  /// Nanoseconds until the earliest timeout (0 when due), or INT64_MAX.
+  int64_t wait_ns() {
+    std::lock_guard<std::mutex> guard{mtx_};
+    if (schedule_.empty())
+      return std::numeric_limits<int64_t>::max();
+    auto d = schedule_.begin()->first - now();
+    auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(d).count();
+    return ns < 0 ? 0 : ns;
+  }
+
+  size_t fire_due() {
+    std::lock_guard<std::mutex> guard{mtx_};
+    return trigger_expired_timeouts();
+  }
+
+  void set_ordinary_timeout(time_point t, caf::abstract_actor* self,
+                            caf::atom_value type, uint64_t id) override {
+    locked([&] { super::set_ordinary_timeout(t, self, type, id); });
+  }
+
+  void set_multi_timeout(time_point t, caf::abstract_actor* self,
+                         caf::atom_value type, uint64_t id) override {
+    locked([&] { super::set_multi_timeout(t, self, type, id); });
+  }
+
+  void set_request_timeout(time_point t, caf::abstract_actor* self,
+                           caf::message_id id) override {
+    locked([&] { super::set_request_timeout(t, self, id); });
+  }
+
+  void cancel_ordinary_timeout(caf::abstract_actor* self,
+                               caf::atom_value type) override {
+    locked([&] { super::cancel_ordinary_timeout(self, type); }, false);
+  }
+
+  void cancel_request_timeout(caf::abstract_actor* self,
+                              caf::message_id id) override {
+    locked([&] { super::cancel_request_timeout(self, id); }, false);
+  }
+
+  void cancel_timeouts(caf::abstract_actor* self) override {
+    locked([&] { super::cancel_timeouts(self); }, false);
+  }
+
+  void schedule_message(time_point t, caf::strong_actor_ptr receiver,
+                        caf::mailbox_element_ptr content) override {
+    locked([&] {
+      super::schedule_message(t, std::move(receiver), std::move(content));
+    });
+  }
+
+  void schedule_message(time_point t, caf::group target,
+                        caf::strong_actor_ptr sender,
+                        caf::message content) override {
+    locked([&] {
+      super::schedule_message(t, std::move(target), std::move(sender),
+                              std::move(content));
+    });
+  }
+
+  void cancel_all() override {
+    locked([&] { super::cancel_all(); }, false);
+  }
+
+private:
+  /// Runs `f` under the mutex. A new timeout set by another thread may be
+  /// earlier than the loop's wait: wake it (free when it is awake).
+  template <class F>
+  void locked(F f, bool adds = true) {
+    {
+      std::lock_guard<std::mutex> guard{mtx_};
+      f();
+    }
+    if (adds && !loop_.in_loop_thread())
+      loop_.wake();
+  }
+
+  std::mutex mtx_;
+  event_loop& loop_;
+};
+
+class loop_coordinator final : public caf::scheduler::abstract_coordinator,
+                               public loop_owner,
+                               public caf::execution_unit {
+public:
+  using super = caf::scheduler::abstract_coordinator;
+
+  static caf::actor_system::module* make(caf::actor_system& sys,
+                                         caf::detail::type_list<>) {
+    auto loop = event_loop::make();
+    if (!loop) {
+      std::fprintf(stderr, "herm: %s\n", render(loop.error()).c_str());
+      std::abort(); // no epoll: nothing of the module can run
+    }
+    return new loop_coordinator(sys, std::move(*loop));
+  }
+
+  loop_coordinator(caf::actor_system& sys, std::unique_ptr<event_loop> loop)
+    : super(sys),
+      caf::execution_unit(&sys),
+      loop_(std::move(loop)),
+      clock_(*loop_) {
+  }
+
+  // -- loop_owner ------------------------------------------------------------------
+
+  event_loop& io_loop() override {
+    return *loop_;
+  }
+
+  // -- abstract_coordinator ---------------------------------------------------------
+
+  caf::actor_clock& clock() noexcept override {
+    return clock_;
+  }
+
+  void enqueue(caf::resumable* job) override {
+    if (loop_->in_loop_thread()) {
+      ready_.push_back(job);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> guard{foreign_mtx_};
+      foreign_.push_back(job);
+    }
+    foreign_count_.fetch_add(1);
+    foreign_enqueues_.fetch_add(1, std::memory_order_relaxed);
+    loop_->wake();
+  }
+
+  void init(caf::actor_system_config& cfg) override {
+    super::init(cfg);
+    num_workers_ = 1;
+    if (!caf::get_if<size_t>(&static_cast<const caf::actor_system_config&>(cfg),
+                             "scheduler.max-throughput"))
+      max_throughput_ = default_throughput;
+  }
+
+  void start() override {
+    thread_ = std::thread{[this] { run(); }};
+    super::start(); // the printer (a detached utility actor)
+  }
+
+  void stop() override {
+    stop_actors();
+    loop_->request_stop();
+    if (thread_.joinable())
+      thread_.join();
+    // Whatever is still queued never runs again.
+    drain_foreign();
+    for (auto* job : ready_)
+      cleanup_and_release(job);
+    ready_.clear();
+    clock_.cancel_all();
+  }
+
+  // -- execution_unit ---------------------------------------------------------------
+
+  void exec_later(caf::resumable* job) override {
+    ready_.push_back(job); // only ever called by a job this thread runs
+  }
+
+  loop_stats stats() const {
+    loop_stats s;
+    s.resumes = resumes_.load(std::memory_order_relaxed);
+    s.foreign_enqueues = foreign_enqueues_.load(std::memory_order_relaxed);
+    s.sleeps = loop_->sleeps();
+    s.wakes = loop_->wakes();
+    return s;
+  }
+
+private:
+  static constexpr size_t default_throughput = 64;
+
+  /// Actor turns between two looks at the descriptors while actors are ready.
+  static constexpr size_t turns_per_poll = 256;
+
+  void run() {
+    pthread_setname_np(pthread_self(), "herm-loop");
+    super::system().thread_started();
+    loop_->set_has_work([this] { return foreign_count_.load() > 0; });
+    while (!loop_->stop_requested()) {
+      drain_foreign();
+      run_ready();
+      drain_foreign();
+      auto wait = ready_.empty() ? clock_.wait_ns() : 0;
+      loop_->run_once(wait);
+      clock_.fire_due();
+    }
+    loop_->leave_thread();
+    super::system().thread_terminates();
+  }
+
+  void drain_foreign() {
+    if (foreign_count_.load() == 0)
+      return;
+    std::lock_guard<std::mutex> guard{foreign_mtx_};
+    foreign_count_.store(0);
+    for (auto* job : foreign_)
+      ready_.push_back(job);
+    foreign_.clear();
+  }
+
+  void run_ready() {
+    for (size_t n = 0; n < turns_per_poll && !ready_.empty(); ++n) {
+      auto* job = ready_.front();
+      ready_.pop_front();
+      resumes_.fetch_add(1, std::memory_order_relaxed);
+      switch (job->resume(this, max_throughput_)) {
+        case caf::resumable::resume_later:
+          ready_.push_back(job); // keeps its reference
+          break;
+        case caf::resumable::done:
+        case caf::resumable::awaiting_message:
+          intrusive_ptr_release(job);
+          break;
+        case caf::resumable::shutdown_execution_unit:
+          break; // not used by this scheduler
+      }
+    }
+  }
+
+  std::unique_ptr<event_loop> loop_;
+  loop_clock clock_;
+  std::thread thread_;
+
+  // Loop thread.
+  std::deque<caf::resumable*> ready_;
+
+  // Any thread.
+  std::mutex foreign_mtx_;
+  std::vector<caf::resumable*> foreign_;
+  std::atomic<size_t> foreign_count_{0};
+  std::atomic<uint64_t> foreign_enqueues_{0};
+  std::atomic<uint64_t> resumes_{0};
+};
+
+} // namespace
+
+void load_loop_scheduler(caf::actor_system_config& cfg) {
+  cfg.load<loop_coordinator>();
+}
+
+loop_stats loop_stats_of(caf::actor_system& sys) {
+  if (auto* lc = dynamic_cast<loop_coordinator*>(&sys.scheduler()))
+    return lc->stats();
+  return {};
+}
+
+} // namespace herm

@@ -1,0 +1,39 @@
+#pragma once
+
+// The loop scheduler: a CAF 0.17 scheduler whose one thread runs every actor
+// of the system and the module's event loop (channels/event_loop.hpp). Its
+// idle wait is the loop's epoll_pwait2 over every driver's descriptor; the
+// actor clock (timeouts, delayed messages) is a timer map on that thread, so
+// setting or cancelling a request timeout wakes no thread; another thread
+// that enqueues work writes the loop's eventfd only while the loop sleeps.
+//
+// A packet is therefore read, handed to its channel, routed and delivered to
+// its APO on the thread the kernel woke (docs/architecture.md, "Threads").
+// An actor that must block (file IO, a long computation) is spawned
+// detached (caf::detached: a thread of its own) so that it does not stall the
+// loop (docs/user-guide.md, "Blocking work").
+
+#include <cstdint>
+
+#include "caf/fwd.hpp"
+
+namespace herm {
+
+/// Makes systems built from `cfg` use the loop scheduler (CAF's documented
+/// way: actor_system_config::load of a scheduler module). The loop thread is
+/// named "herm-loop". `scheduler.max-throughput` bounds the messages an
+/// actor handles per turn (default here: 64, so that a busy actor cannot
+/// keep the loop from its descriptors).
+void load_loop_scheduler(caf::actor_system_config& cfg);
+
+/// What the loop scheduler of `sys` did so far; all zero when `sys` runs on
+/// another scheduler. For tests and benchmarks.
+struct loop_stats {
+  uint64_t resumes = 0;        // actor turns run
+  uint64_t foreign_enqueues = 0; // actors made ready by another thread
+  uint64_t sleeps = 0;         // waits in epoll that blocked
+  uint64_t wakes = 0;          // eventfd writes to end such a wait
+};
+loop_stats loop_stats_of(caf::actor_system& sys);
+
+} // namespace herm
