@@ -10,6 +10,7 @@
 #include "caf/typed_event_based_actor.hpp"
 
 #include "channels/error.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/type_ids.hpp"
 #include "channels/channel.hpp"
 #include "channels/link_driver.hpp"
@@ -272,7 +273,7 @@ caf::expected<device_actor> spawn_device(caf::actor_system& sys,
                         + std::to_string(min_fragment_mtu));
   auto counters = std::make_shared<device_counters>();
   auto frames = std::make_shared<demux>(counters);
-  if (auto err = (*driver)->start(frames))
+  if (auto err = (*driver)->start(frames, io_loop_of(sys)))
     return err;
   auto dev = sys.spawn(device_fun, cfg, *driver, counters, frames);
   frames->set_device(dev);

@@ -308,9 +308,7 @@ io_thread::~io_thread() {
 
 loop_owner::~loop_owner() = default;
 
-event_loop& io_loop_of(caf::actor_system& sys) {
-  if (auto* owner = dynamic_cast<loop_owner*>(&sys.scheduler()))
-    return owner->io_loop();
+event_loop& shared_io_loop() {
   static auto shared = [] {
     auto t = io_thread::make();
     if (!t) {
@@ -320,6 +318,12 @@ event_loop& io_loop_of(caf::actor_system& sys) {
     return std::move(*t);
   }();
   return shared->loop();
+}
+
+event_loop& io_loop_of(caf::actor_system& sys) {
+  if (auto* owner = dynamic_cast<loop_owner*>(&sys.scheduler()))
+    return owner->io_loop();
+  return shared_io_loop();
 }
 
 } // namespace herm

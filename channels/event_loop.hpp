@@ -237,10 +237,14 @@ public:
   virtual event_loop& io_loop() = 0;
 };
 
+/// One io_thread shared by the whole process, started on first use and
+/// stopped at exit: the loop of drivers started without one (driver tests,
+/// benchmarks) and of systems on another scheduler. Aborts with a message
+/// if its thread cannot start (the process cannot do IO then).
+event_loop& shared_io_loop();
+
 /// The loop on which `sys`'s devices run their drivers: the scheduler's own
-/// when it is a loop_owner, else one io_thread shared by the whole process
-/// (started on first use, stopped at exit). Aborts with a message if that
-/// thread cannot start (the process cannot do IO then).
+/// when it is a loop_owner, else shared_io_loop().
 event_loop& io_loop_of(caf::actor_system& sys);
 
 } // namespace herm

@@ -4,6 +4,7 @@
 #include <mutex>
 
 #include "channels/error.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/options.hpp"
 
 namespace herm {
@@ -24,6 +25,10 @@ void frame_handler::on_kernel_drops(uint64_t) {
 }
 
 link_driver::~link_driver() = default;
+
+caf::error link_driver::start(std::shared_ptr<frame_handler> handler) {
+  return start(std::move(handler), shared_io_loop());
+}
 
 uint8_t link_driver::lane(link_addr, uint8_t) const {
   return 0;

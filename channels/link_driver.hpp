@@ -14,6 +14,8 @@
 
 namespace herm {
 
+class event_loop;
+
 /// Lanes: the order a link keeps between one sender's frames. Frames of one
 /// sender in one lane arrive in the order they were sent; frames in
 /// different lanes may overtake each other. On CAN a lane is what the
@@ -73,8 +75,16 @@ class link_driver {
 public:
   virtual ~link_driver();
 
-  /// Starts delivering received frames to `handler`.
-  virtual caf::error start(std::shared_ptr<frame_handler> handler) = 0;
+  /// Starts delivering received frames to `handler`, from callbacks on
+  /// `loop` (the module's event loop: channels/event_loop.hpp). The driver
+  /// registers its descriptors there and owns no receive thread; `loop`
+  /// must outlive the driver's stop().
+  virtual caf::error start(std::shared_ptr<frame_handler> handler,
+                           event_loop& loop)
+    = 0;
+
+  /// start(handler, shared_io_loop()): for driver tests and benchmarks.
+  caf::error start(std::shared_ptr<frame_handler> handler);
 
   /// Stops receiving and joins any thread of the driver. Idempotent. No
   /// handler call happens after it returns.

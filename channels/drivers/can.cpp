@@ -179,7 +179,8 @@ public:
     return caf::none;
   }
 
-  caf::error start(std::shared_ptr<frame_handler> handler) override {
+  caf::error start(std::shared_ptr<frame_handler> handler,
+                   event_loop&) override {
     std::lock_guard<std::mutex> guard{life_mtx_};
     if (state_ != state::opened)
       return fail(ec::device_unavailable, state_ == state::running

@@ -162,7 +162,8 @@ public:
 
   // -- link_driver ---------------------------------------------------------------
 
-  caf::error start(std::shared_ptr<frame_handler> handler) override {
+  caf::error start(std::shared_ptr<frame_handler> handler,
+                   event_loop&) override {
     std::lock_guard<std::mutex> guard{life_mtx_};
     if (!handler)
       return fail(ec::invalid_parameter, "start needs a frame handler");

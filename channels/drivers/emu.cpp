@@ -208,7 +208,8 @@ public:
 
   // -- link_driver ---------------------------------------------------------------
 
-  caf::error start(std::shared_ptr<frame_handler> handler) override {
+  caf::error start(std::shared_ptr<frame_handler> handler,
+                   event_loop&) override {
     std::lock_guard<std::mutex> guard{lifecycle_mtx_};
     if (handler == nullptr)
       return make_error(ec::invalid_parameter, prefix_ + "start without handler");

@@ -47,7 +47,8 @@ public:
     stop();
   }
 
-  caf::error start(std::shared_ptr<frame_handler> handler) override {
+  caf::error start(std::shared_ptr<frame_handler> handler,
+                   event_loop&) override {
     auto& reg = registry::get();
     std::lock_guard<std::mutex> guard{reg.mtx};
     auto& seg = reg.segments[segment_];

@@ -78,7 +78,8 @@ public:
     ::close(wake_fd_);
   }
 
-  caf::error start(std::shared_ptr<frame_handler> handler) override {
+  caf::error start(std::shared_ptr<frame_handler> handler,
+                   event_loop&) override {
     std::lock_guard<std::mutex> guard{life_mtx_};
     if (handler == nullptr)
       return make_error(ec::invalid_parameter, prefix_ + "start needs a handler");
