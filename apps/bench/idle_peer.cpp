@@ -4,8 +4,8 @@
 //   bench_idle_peer caf        a bare caf::actor_system with CAF's defaults
 //                              (stealing scheduler, one worker per core)
 //   bench_idle_peer caf-herm   a bare caf::actor_system configured as hermd
-//                              configures it (herm::configure: sharing,
-//                              one worker, HERM's message types)
+//                              configures it (herm::configure: the loop
+//                              scheduler, HERM's message types)
 //   bench_idle_peer dds        one Cyclone DDS domain participant on the
 //                              loopback interface (when built with Cyclone
 //                              DDS)
@@ -53,7 +53,7 @@ void wait_for_stop(const sigset_t& set) {
 int run_caf(const sigset_t& set, bool herm_config) {
   caf::actor_system_config cfg;
   if (herm_config)
-    herm::configure(cfg); // hermd's defaults: sharing, one worker
+    herm::configure(cfg); // hermd's default: the loop scheduler
   else
     cfg.set("logger.verbosity", caf::atom("quiet"));
   caf::actor_system sys{cfg};

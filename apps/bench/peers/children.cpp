@@ -135,7 +135,7 @@ std::vector<std::string> endpoint_args(const std::string& exe, const std::string
           "--role", role,
           "--transport", p.transport,
           "--mode", p.mode,
-          "--policy", p.policy.empty() ? std::string{"sharing"} : p.policy,
+          "--policy", p.policy.empty() ? std::string{"loop"} : p.policy,
           "--port", std::to_string(p.port),
           "--port2", std::to_string(p.port2),
           "--port3", std::to_string(p.port3),

@@ -5,7 +5,7 @@
 //   herm-bench-rtt                       the full default suite (minutes)
 //   herm-bench-rtt --quick               a smoke run (seconds)
 //   herm-bench-rtt --only herm,udp --sizes 16 --repeat 5 --json rtt.json
-//   herm-bench-rtt --modes oneway,router --policies sharing:1
+//   herm-bench-rtt --modes oneway,router --policies loop
 //
 // Modes: back-to-back and gap-10ms (request round trips between two
 // processes), oneway (messages per second at the receiver under a credit
@@ -56,9 +56,9 @@ namespace {
 /// One transport as measured: a family (the server and client functions)
 /// and, for the actor transports, a scheduler policy.
 struct variant {
-  std::string name;   // "herm/sharing:1"
+  std::string name;   // "herm/loop"
   std::string family; // "herm"
-  std::string policy; // "sharing:1", "sharing", "stealing" or empty
+  std::string policy; // "loop", "sharing:1", "sharing", "stealing" or empty
   std::string label;  // for people
   bool batch = false; // udp oneway: sendmmsg
 };
@@ -245,6 +245,8 @@ summary summarize(const case_result& c) {
 /// "sharing:1" -> "sharing scheduler, 1 worker".
 std::string policy_label(const std::string& policy) {
   auto [name, threads] = split_policy(policy);
+  if (name == "loop")
+    return "loop scheduler (one thread runs the actors and the sockets)";
   if (threads == 0)
     return name + " scheduler, one worker per core ("
            + std::to_string(std::thread::hardware_concurrency()) + ")";
@@ -314,7 +316,7 @@ int main(int argc, char** argv) {
   std::string role = "run";
   endpoint_params ep;
   uint32_t hello_ms = 1000, gap_us = 0, timeout_ms = 2000, stall_ms = 100;
-  std::string only, sizes_arg = "16,256,1400", policies_arg = "sharing:1,sharing,stealing";
+  std::string only, sizes_arg = "16,256,1400", policies_arg = "loop,sharing:1,stealing";
   std::string modes_arg, oneway_sizes_arg = "64";
   std::string json_path;
   uint32_t count = 2000, warmup = 200, gap_count = 300, gap_warmup = 20;
@@ -325,7 +327,7 @@ int main(int argc, char** argv) {
   app.add_option("--only", only, "transports to run, comma-separated: udp,herm,caf,zmq,dds (default: all)");
   app.add_option("--modes", modes_arg, "modes to run, comma-separated: back-to-back,gap,oneway,inprocess,router (default: all)");
   app.add_option("--sizes", sizes_arg, "payload sizes in bytes of every mode (latency modes: 16,256,1400; oneway: 64)");
-  app.add_option("--policies", policies_arg, "CAF schedulers for herm and caf, POLICY[:THREADS] (sharing:1,sharing,stealing; sharing:1 = one worker, sharing = one per core)");
+  app.add_option("--policies", policies_arg, "schedulers for herm and caf, POLICY[:THREADS] (loop, sharing:1, sharing, stealing; loop = HERM's loop scheduler, sharing:1 = one worker, sharing = one per core)");
   struct count_option {
     const char* name;
     uint32_t* value;
@@ -448,8 +450,8 @@ int main(int argc, char** argv) {
     } catch (const std::exception&) {
       name.clear();
     }
-    if (name != "sharing" && name != "stealing") {
-      std::cerr << "--policies: '" << pol << "' is not sharing or stealing[:THREADS]" << std::endl;
+    if (name != "loop" && name != "sharing" && name != "stealing") {
+      std::cerr << "--policies: '" << pol << "' is not loop, or sharing or stealing[:THREADS]" << std::endl;
       return 2;
     }
   }

@@ -33,9 +33,10 @@ struct endpoint_params {
   /// (round trips inside one process), "router" (round trips across a
   /// router module; herm only).
   std::string mode = "rtt";
-  /// CAF scheduler for herm and caf: "sharing" or "stealing", optionally
-  /// with a worker count after a colon ("sharing:1"; none: one per core).
-  std::string policy = "sharing";
+  /// Scheduler for herm and caf: "loop" (HERM's loop scheduler), or CAF's
+  /// "sharing" or "stealing", optionally with a worker count after a colon
+  /// ("sharing:1"; none: one per core).
+  std::string policy = "loop";
   /// udp, caf, zmq: the server's port (0: the server picks and prints it).
   /// herm: the server module's UDP port. dds: the DDS domain id.
   uint16_t port = 0;
