@@ -5,22 +5,29 @@
 // (peers list). With neither configured, broadcast_addr sends nothing and
 // succeeds (nobody to reach).
 //
-// Threading: send() may be called from any thread; it holds a shared lock so
-// that stop() cannot close the socket under it. One receive thread per
-// driver polls the socket and an eventfd (stop's wake-up), drains datagrams
-// with recvmmsg into buffers allocated once in start(), and calls the
-// handler. Datagrams from our own port and one of this host's (namespace's)
-// IPv4 addresses, snapshotted by getifaddrs in start(), are our own
-// broadcasts looped back by the kernel and are ignored. Datagrams the kernel
-// dropped because the receive buffer was full are counted through
+// Threading (the event-loop contract, channels/event_loop.hpp): the driver
+// owns no thread. start() registers the socket with the module's event loop
+// (through run_sync, so any thread may call it); the readiness callback
+// reads one recvmmsg batch (buffers allocated once in start()) per call and
+// returns to the loop, which calls it again next turn while datagrams wait
+// (level-triggered), so one busy link cannot starve the others. Every
+// handler call, on_failure included (at most once), happens on the loop
+// thread from that callback. stop() is idempotent and may be called from any
+// thread: it unwatches the socket on the loop thread (run_sync), closes it
+// and drops the handler; no handler call follows its return. Called from a
+// handler (on the loop thread, run_sync runs inline) it ends delivery at
+// once: the callback sees stopping_ and touches nothing more. send() may be
+// called from any thread; it holds a shared lock so that stop() cannot close
+// the socket under it. Datagrams from our own port and one of this host's
+// (namespace's) IPv4 addresses, snapshotted by getifaddrs in start(), are
+// our own broadcasts looped back by the kernel and are ignored. Datagrams
+// the kernel dropped because the receive buffer was full are counted through
 // SO_RXQ_OVFL (the drop count rides on the next datagram received) and
 // reported with frame_handler::on_kernel_drops.
 
 #include <ifaddrs.h>
 #include <net/if.h>
-#include <poll.h>
-#include <pthread.h>
-#include <sys/eventfd.h>
+#include <sys/epoll.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -32,14 +39,13 @@
 #include <mutex>
 #include <optional>
 #include <shared_mutex>
-#include <system_error>
-#include <thread>
 #include <vector>
 
 #include "channels/error.hpp"
 #include "channels/drivers/params.hpp"
 #include "channels/drivers/udp_addr.hpp"
 #include "channels/drivers/posix.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
 
@@ -53,8 +59,12 @@ using posix::unique_fd;
 /// IPv4 (20) and UDP (8) headers inside a 1500-byte Ethernet payload.
 constexpr uint32_t default_udp_mtu = 1500 - 20 - 8;
 
-/// Datagrams drained per recvmmsg call at most.
+/// Datagrams read per readiness callback (one recvmmsg call) at most.
 constexpr size_t max_batch = 32;
+
+/// recvmmsg calls per callback that fail with a transient error (ICMP
+/// unreachable reported on the socket, a signal) before it returns anyway.
+constexpr int max_transient_retries = 4;
 
 /// Upper bound of the preallocated receive memory (batch * MTU) in bytes.
 constexpr size_t max_rx_memory = size_t{1} << 20;
@@ -91,70 +101,69 @@ struct udp_settings {
 
 class udp_driver final : public link_driver {
 public:
-  /// Takes ownership of `fd` (bound socket) and `wake_fd` (eventfd).
-  udp_driver(udp_settings cfg, int fd, int wake_fd, link_addr local)
-    : cfg_(std::move(cfg)), local_(local), fd_(fd), wake_fd_(wake_fd) {
+  /// Takes ownership of `fd` (bound, non-blocking socket).
+  udp_driver(udp_settings cfg, int fd, link_addr local)
+    : cfg_(std::move(cfg)), local_(local), fd_(fd) {
   }
 
-  /// Must not run on the receive thread (i.e. the handler must not drop the
-  /// last reference to its driver).
+  /// Must not run inside a handler call of this driver (i.e. the handler
+  /// must not drop the last reference to its driver).
   ~udp_driver() override {
     stop();
   }
 
+  /// Watches the socket on `loop`; see the file comment for the contract.
   caf::error start(std::shared_ptr<frame_handler> handler,
-                   event_loop&) override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (state_ != state::opened)
-      return fail(ec::device_unavailable, state_ == state::running
-                                            ? "already started"
-                                            : "already stopped");
-    if (!handler)
-      return fail(ec::invalid_parameter, "start needs a frame handler");
-    if (auto err = collect_own_ips())
-      return err;
-    auto mtu = size_t{cfg_.profile.mtu};
-    batch_ = std::clamp<size_t>(max_rx_memory / mtu, 1, max_batch);
-    buffers_.assign(batch_ * mtu, 0);
-    msgs_.assign(batch_, mmsghdr{});
-    iovs_.assign(batch_, iovec{});
-    names_.assign(batch_, sockaddr_in{});
-    // uint64_t storage keeps every cmsghdr aligned.
-    controls_.assign(batch_ * (rx_control_size / sizeof(uint64_t) + 1), 0);
-    for (size_t i = 0; i < batch_; ++i) {
-      iovs_[i].iov_base = buffers_.data() + i * mtu;
-      iovs_[i].iov_len = mtu;
-      msgs_[i].msg_hdr.msg_iov = &iovs_[i];
-      msgs_[i].msg_hdr.msg_iovlen = 1;
-      msgs_[i].msg_hdr.msg_name = &names_[i];
-      msgs_[i].msg_hdr.msg_control
-        = controls_.data() + i * (rx_control_size / sizeof(uint64_t) + 1);
-    }
-    handler_ = std::move(handler);
-    if (auto why = posix::start_thread(thread_, "receive", [this] { run(); })) {
-      handler_.reset();
-      return fail(ec::device_unavailable, *why);
-    }
-    state_ = state::running;
-    return caf::none;
+                   event_loop& loop) override {
+    caf::error result;
+    loop.run_sync([&] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ != state::opened) {
+        result = fail(ec::device_unavailable, state_ == state::running
+                                                ? "already started"
+                                                : "already stopped");
+        return;
+      }
+      if (!handler) {
+        result = fail(ec::invalid_parameter, "start needs a frame handler");
+        return;
+      }
+      if ((result = collect_own_ips()))
+        return;
+      allocate_buffers();
+      if (auto err = loop.watch(fd_, EPOLLIN,
+                                [this](uint32_t events) { on_ready(events); })) {
+        result = fail(ec::device_unavailable,
+                      "cannot watch the socket: " + render(err));
+        return;
+      }
+      handler_ = std::move(handler);
+      loop_ = &loop;
+      state_ = state::running;
+    });
+    return result;
   }
 
   void stop() override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (state_ == state::stopped)
-      return;
-    stopping_ = true;
-    if (!posix::wake_and_join(thread_, wake_fd_))
-      return; // Called from a handler: the loop ends after this callback.
-    handler_.reset();
+    event_loop* loop;
     {
-      std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
-      ::close(fd_);
-      fd_ = -1;
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ == state::stopped)
+        return;
+      if (state_ == state::opened) { // never started: nothing is watched
+        close_socket();
+        return;
+      }
+      loop = loop_;
     }
-    ::close(wake_fd_);
-    wake_fd_ = -1;
-    state_ = state::stopped;
+    loop->run_sync([this] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ != state::running)
+        return; // another stop came first
+      loop_->unwatch(fd_);
+      close_socket();
+      handler_.reset();
+    });
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -230,6 +239,38 @@ private:
     return make_error(code, "device '" + cfg_.device + "': " + what);
   }
 
+  /// Ends delivery and closes the socket. Requires life_mtx_; on the loop
+  /// thread once started.
+  void close_socket() {
+    stopping_ = true;
+    state_ = state::stopped;
+    std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
+    ::close(fd_);
+    fd_ = -1;
+  }
+
+  /// The receive batch: `batch_` buffers of one MTU each, with their
+  /// headers, addresses and control space, allocated once.
+  void allocate_buffers() {
+    auto mtu = size_t{cfg_.profile.mtu};
+    batch_ = std::clamp<size_t>(max_rx_memory / mtu, 1, max_batch);
+    buffers_.assign(batch_ * mtu, 0);
+    msgs_.assign(batch_, mmsghdr{});
+    iovs_.assign(batch_, iovec{});
+    names_.assign(batch_, sockaddr_in{});
+    // uint64_t storage keeps every cmsghdr aligned.
+    controls_.assign(batch_ * (rx_control_size / sizeof(uint64_t) + 1), 0);
+    for (size_t i = 0; i < batch_; ++i) {
+      iovs_[i].iov_base = buffers_.data() + i * mtu;
+      iovs_[i].iov_len = mtu;
+      msgs_[i].msg_hdr.msg_iov = &iovs_[i];
+      msgs_[i].msg_hdr.msg_iovlen = 1;
+      msgs_[i].msg_hdr.msg_name = &names_[i];
+      msgs_[i].msg_hdr.msg_control
+        = controls_.data() + i * (rx_control_size / sizeof(uint64_t) + 1);
+    }
+  }
+
   // Called with fd_mtx_ held (shared).
   caf::error send_to(link_addr dst, const uint8_t* data, size_t size) {
     auto sa = udp::to_sockaddr(dst);
@@ -280,57 +321,41 @@ private:
     return std::find(own_ips_.begin(), own_ips_.end(), ip) != own_ips_.end();
   }
 
+  /// Reports the failure once and stops watching the socket (send() keeps
+  /// working until stop). Loop thread.
   void report_failure(const std::string& what, int err) {
+    loop_->unwatch(fd_);
     handler_->on_failure(
       fail(ec::device_failed, what + " on " + udp::format_addr(local_) + ": "
                                 + errno_text(err)));
   }
 
-  // -- receive thread ----------------------------------------------------------
+  // -- the loop thread ---------------------------------------------------------
 
-  void run() {
-    pthread_setname_np(pthread_self(), "herm-udp");
-    pollfd fds[2];
-    fds[0] = pollfd{fd_, POLLIN, 0};
-    fds[1] = pollfd{wake_fd_, POLLIN, 0};
-    while (!stopping_) {
-      if (::poll(fds, 2, -1) < 0) {
-        if (errno == EINTR)
-          continue;
-        report_failure("poll failed", errno);
-        return;
-      }
-      if (fds[1].revents != 0)
-        return;
-      auto ev = fds[0].revents;
-      if ((ev & POLLNVAL) != 0) {
-        report_failure("socket became invalid", EBADF);
-        return;
-      }
-      if ((ev & POLLERR) != 0) {
-        // A pending socket error (reading SO_ERROR clears it).
-        int err = 0;
-        socklen_t len = sizeof(err);
-        if (::getsockopt(fd_, SOL_SOCKET, SO_ERROR, &err, &len) != 0)
-          err = errno;
-        if (err != 0 && !is_transient(err)) {
-          report_failure("socket error", err);
-          return;
-        }
-      }
-      if ((ev & (POLLIN | POLLERR)) == 0 && (ev & POLLHUP) != 0) {
-        report_failure("socket hung up", EPIPE);
-        return;
-      }
-      if ((ev & POLLIN) != 0 && !drain())
-        return;
+  /// The socket's readiness callback.
+  void on_ready(uint32_t events) {
+    // Keeps the handler alive should it stop the driver during a call.
+    auto keep = handler_;
+    if ((events & EPOLLERR) != 0) {
+      // A pending socket error (reading SO_ERROR clears it).
+      int err = 0;
+      socklen_t len = sizeof(err);
+      if (::getsockopt(fd_, SOL_SOCKET, SO_ERROR, &err, &len) != 0)
+        err = errno;
+      if (err != 0 && !is_transient(err))
+        return report_failure("socket error", err);
     }
+    if ((events & (EPOLLIN | EPOLLERR)) == 0 && (events & EPOLLHUP) != 0)
+      return report_failure("socket hung up", EPIPE);
+    if ((events & EPOLLIN) != 0)
+      read_batch();
   }
 
-  /// Reads until the socket is empty. Returns false after a fatal error.
-  bool drain() {
+  /// Reads one batch of datagrams and hands them to the handler; returns
+  /// early when the handler stopped the driver.
+  void read_batch() {
     auto mtu = cfg_.profile.mtu;
-    while (!stopping_) {
+    for (int attempt = 0; attempt < max_transient_retries; ++attempt) {
       for (size_t i = 0; i < batch_; ++i) {
         msgs_[i].msg_hdr.msg_namelen = sizeof(sockaddr_in);
         msgs_[i].msg_hdr.msg_flags = 0;
@@ -344,16 +369,17 @@ private:
       if (n < 0) {
         auto err = errno;
         if (err == EAGAIN || err == EWOULDBLOCK)
-          return true;
+          return;
         if (is_transient(err))
           continue;
-        report_failure("recvmmsg failed", err);
-        return false;
+        return report_failure("recvmmsg failed", err);
       }
-      for (int i = 0; i < n && !stopping_; ++i) {
+      for (int i = 0; i < n; ++i) {
         auto& msg = msgs_[static_cast<size_t>(i)];
         auto& name = names_[static_cast<size_t>(i)];
         note_drops(msg.msg_hdr);
+        if (stopping_)
+          return;
         if (is_own(name))
           continue;
         auto src = udp::from_sockaddr(name);
@@ -366,11 +392,11 @@ private:
                              static_cast<const uint8_t*>(
                                msg.msg_hdr.msg_iov->iov_base),
                              msg.msg_len);
+        if (stopping_)
+          return;
       }
-      if (static_cast<size_t>(n) < batch_)
-        return true;
+      return;
     }
-    return true;
   }
 
   /// Reports what the kernel dropped since the last datagram that told us.
@@ -391,16 +417,17 @@ private:
   /// Guards closing fd_ against concurrent send() calls.
   mutable std::shared_mutex fd_mtx_;
   int fd_;
-  int wake_fd_;
 
-  /// Serialises start() and stop().
+  /// Guards the life cycle (start, stop); never held across run_sync nor
+  /// during a handler call.
   std::mutex life_mtx_;
   state state_ = state::opened;
+  event_loop* loop_ = nullptr;
+  /// Set by stop (on the loop thread once started): delivery ends at once.
   std::atomic<bool> stopping_{false};
-  std::thread thread_;
   std::shared_ptr<frame_handler> handler_;
 
-  // Owned by the receive thread once started.
+  // The loop thread's once started.
   std::vector<uint32_t> own_ips_;
   size_t batch_ = 0;
   std::vector<uint8_t> buffers_;
@@ -539,15 +566,9 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
       != 0)
     return fail(ec::device_unavailable, "getsockname failed: "
                                           + errno_text(errno));
-  unique_fd wake{::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)};
-  if (wake.get() < 0)
-    return fail(ec::device_unavailable,
-                "cannot create an eventfd: " + errno_text(errno));
   auto local = udp::from_sockaddr(bound);
-  auto drv = std::make_shared<udp_driver>(std::move(set), sock.get(),
-                                          wake.get(), local);
+  auto drv = std::make_shared<udp_driver>(std::move(set), sock.get(), local);
   sock.release();
-  wake.release();
   return link_driver_ptr{std::move(drv)};
 }
 

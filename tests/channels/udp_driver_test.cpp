@@ -30,6 +30,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdlib>
@@ -38,10 +39,12 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "channels/error.hpp"
 #include "channels/drivers/udp_addr.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
 #include "tests/channels/recorder.hpp"
 
@@ -126,12 +129,15 @@ struct station {
   }
 };
 
-/// Opens and starts a driver; the error text on failure, "" on success.
-std::string start_station(station& st, const device_config& cfg) {
+/// Opens and starts a driver on `loop` (default: the process's shared
+/// loop); the error text on failure, "" on success.
+std::string start_station(station& st, const device_config& cfg,
+                          event_loop* loop = nullptr) {
   auto drv = open_udp(cfg);
   if (!drv)
     return "open failed: " + render(drv.error());
-  if (auto err = (*drv)->start(st.rec))
+  if (auto err = loop != nullptr ? (*drv)->start(st.rec, *loop)
+                                 : (*drv)->start(st.rec))
     return "start failed: " + render(err);
   st.drv = std::move(*drv);
   return "";
@@ -1033,6 +1039,115 @@ TEST(udp_driver, refuses_a_second_start_and_a_missing_handler) {
   EXPECT_TRUE(is((*drv)->start(std::make_shared<recorder>()),
                  ec::device_unavailable));
   (*drv)->stop();
+}
+
+// -- the event loop ----------------------------------------------------------------
+
+TEST(udp_driver, hands_frames_to_the_handler_on_the_loop_thread_only) {
+  auto io = io_thread::make();
+  ASSERT_TRUE(io) << render(io.error());
+  auto& loop = (*io)->loop();
+  station st;
+  std::atomic<size_t> elsewhere{0};
+  st.rec->on_each_frame([&](const recorder::frame&) {
+    if (!loop.in_loop_thread())
+      ++elsewhere;
+  });
+  ASSERT_EQ(start_station(st, udp_config("eth0", "127.0.0.1:0"), &loop), "");
+  raw_socket raw;
+  ASSERT_TRUE(raw.ok());
+  for (uint8_t i = 0; i < 20; ++i)
+    ASSERT_TRUE(raw.send_to(st.drv->local_addr(), pattern(8, i)));
+  ASSERT_TRUE(st.rec->wait_frames(20));
+  st.drv->stop();
+  EXPECT_EQ(elsewhere.load(), 0u);
+}
+
+TEST(udp_driver, reads_one_batch_per_turn_so_a_busy_link_does_not_starve_another) {
+  // No thread runs this loop: the test turns it, so a turn is observable.
+  auto made = event_loop::make();
+  ASSERT_TRUE(made) << render(made.error());
+  auto& loop = **made;
+  station busy;
+  station quiet;
+  ASSERT_EQ(start_station(busy, udp_config("busy", "127.0.0.1:0",
+                                           {{"rcvbuf", "1048576"}}),
+                          &loop),
+            "");
+  ASSERT_EQ(start_station(quiet, udp_config("quiet", "127.0.0.1:0"), &loop),
+            "");
+  raw_socket raw;
+  ASSERT_TRUE(raw.ok());
+  constexpr size_t n = 100; // above one batch (32 datagrams)
+  for (size_t i = 0; i < n; ++i)
+    ASSERT_TRUE(raw.send_to(busy.drv->local_addr(),
+                            pattern(8, static_cast<uint8_t>(i))));
+  ASSERT_TRUE(raw.send_to(quiet.drv->local_addr(), bytes_of("me too")));
+  loop.run_once(0);
+  EXPECT_EQ(quiet.rec->payloads(), std::vector<byte_buffer>{bytes_of("me too")});
+  auto first_turn = busy.rec->frames().size();
+  EXPECT_GE(first_turn, 1u);
+  EXPECT_LT(first_turn, n) << "one callback drained the whole socket";
+  // Later turns deliver the rest, in order.
+  for (int turn = 0; turn < 100 && busy.rec->frames().size() < n; ++turn)
+    loop.run_once(0);
+  auto heard = busy.rec->payloads();
+  ASSERT_EQ(heard.size(), n);
+  for (size_t i = 0; i < n; ++i)
+    EXPECT_EQ(heard[i], pattern(8, static_cast<uint8_t>(i))) << i;
+}
+
+TEST(udp_driver, stop_from_another_thread_while_frames_arrive_returns_after_the_last_handler_call) {
+  station st;
+  std::atomic<bool> returned{false};
+  std::atomic<size_t> late{0};
+  st.rec->on_each_frame([&](const recorder::frame&) {
+    if (returned)
+      ++late;
+  });
+  ASSERT_EQ(start_station(st, udp_config("eth0", "127.0.0.1:0")), "");
+  auto dst = st.drv->local_addr();
+  std::atomic<bool> done{false};
+  std::thread flood{[&] {
+    raw_socket raw;
+    // Until the test is done, then 200 more after stop returned.
+    for (size_t after = 0; raw.ok() && after < 200; after += done ? 1 : 0) {
+      raw.send_to(dst, bytes_of("flood"));
+      if (!done)
+        std::this_thread::yield();
+    }
+  }};
+  bool arrived = st.rec->wait_frames(10);
+  st.drv->stop();
+  returned = true;
+  done = true;
+  flood.join();
+  ASSERT_TRUE(arrived);
+  EXPECT_EQ(late.load(), 0u);
+  EXPECT_TRUE(st.rec->failures().empty());
+}
+
+TEST(udp_driver, stop_from_a_handler_with_frames_queued_delivers_no_further_frame) {
+  auto made = event_loop::make();
+  ASSERT_TRUE(made) << render(made.error());
+  auto& loop = **made;
+  station st;
+  st.rec->on_each_frame([&](const recorder::frame&) { st.drv->stop(); });
+  auto drv = open_udp(udp_config("eth0", "127.0.0.1:0"));
+  ASSERT_TRUE(drv) << render(drv.error());
+  st.drv = *drv;
+  raw_socket raw;
+  ASSERT_TRUE(raw.ok());
+  // Ten datagrams wait in the socket before the first callback: one batch.
+  for (uint8_t i = 0; i < 10; ++i)
+    ASSERT_TRUE(raw.send_to(st.drv->local_addr(), pattern(4, i)));
+  ASSERT_FALSE(st.drv->start(st.rec, loop));
+  for (int turn = 0; turn < 10; ++turn)
+    loop.run_once(0);
+  EXPECT_EQ(st.rec->payloads(), std::vector<byte_buffer>{pattern(4, 0)});
+  EXPECT_EQ(loop.watched(), 0u);
+  EXPECT_TRUE(is(send_bytes(*st.drv, raw.local(), bytes_of("late")),
+                 ec::device_failed));
 }
 
 // -- several processes -----------------------------------------------------------
