@@ -55,6 +55,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   HERM_FUZZ_CHECK(in(cfg->log_level,
                      {"trace", "debug", "info", "warn", "error", "off"}));
   HERM_FUZZ_CHECK(in(cfg->log_format, {"text", "json"}));
-  HERM_FUZZ_CHECK(in(cfg->scheduler, {"sharing", "stealing"}));
+  HERM_FUZZ_CHECK(in(cfg->scheduler, {"loop", "sharing", "stealing"}));
   return 0;
 }
