@@ -8,15 +8,31 @@
 // ("peer"); this end is 0 ("local"). send() to 1 or to broadcast_addr goes
 // down the line.
 //
-// Threading: send() and set_param() may be called from any thread; they
-// hold tx_mtx_, which also guards the descriptor against stop(). send()
-// encodes into a bounded transmit buffer and makes one non-blocking write()
-// when the buffer was empty; what the tty did not take stays buffered and is
-// written by the IO thread on POLLOUT, so a short write never splits a frame
-// from its successor. One IO thread per driver polls the tty and an eventfd
-// (stop and "flush me" wake-ups), reads what arrived, feeds the decoder and
-// calls the handler. A hangup (pty master closed, USB adapter unplugged:
-// POLLHUP, EOF, EIO, ENODEV) ends the thread after one on_failure.
+// Threading (the event-loop contract, channels/event_loop.hpp): the driver
+// owns no thread. start() registers the tty with the module's event loop
+// (through run_sync, so any thread may call it), for input and, while
+// encoded bytes wait for the line, for output. The readiness callback reads
+// at most rx_reads_per_turn chunks, feeds the decoder and calls the handler,
+// then returns to the loop (level-triggered: it is called again next turn
+// while input waits), so one busy line cannot starve other links. Every
+// handler call, on_failure included, happens on the loop thread. A hangup
+// (pty master closed, USB adapter unplugged: EPOLLHUP, EOF, EIO, ENODEV) is
+// reported once with on_failure and the tty is no longer watched.
+//
+// send() and set_param() may be called from any thread; they hold tx_mtx_,
+// which also guards the descriptor against stop(). send() encodes into a
+// bounded transmit buffer and makes one non-blocking write() when the buffer
+// was empty; what the tty did not take stays buffered and is written from
+// the callback on EPOLLOUT, so a short write never splits a frame from its
+// successor. Watching for EPOLLOUT is a loop-thread change: send() makes it
+// at once on the loop thread, else posts it (the posted task checks a shared
+// alive flag, so it does nothing once the driver stopped or died).
+//
+// stop() is idempotent and may be called from any thread: on the loop
+// thread (run_sync) it unwatches the tty, discards what was not sent,
+// closes the line and drops the handler; no handler call follows its
+// return. Called from a handler it ends delivery at once: the callback sees
+// stopping_ and touches the descriptor no more.
 //
 // Ownership of the line: flock(LOCK_EX | LOCK_NB) on the open tty
 // (LOCK_SH with exclusive: false), as picocom and other serial tools do.
@@ -30,9 +46,7 @@
 // is named from /proc/locks in the refusal.
 
 #include <fcntl.h>
-#include <poll.h>
-#include <pthread.h>
-#include <sys/eventfd.h>
+#include <sys/epoll.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
@@ -47,15 +61,15 @@
 #include <cstring>
 #include <mutex>
 #include <sstream>
+#include <memory>
 #include <string>
-#include <system_error>
-#include <thread>
 #include <vector>
 
 #include "channels/error.hpp"
 #include "channels/drivers/serial_framing.hpp"
 #include "channels/drivers/serial_settings.hpp"
 #include "channels/drivers/posix.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
 
@@ -64,6 +78,7 @@ namespace herm {
 namespace {
 
 using posix::errno_text;
+using posix::now_ns;
 using posix::unique_fd;
 
 // -- constants -------------------------------------------------------------------
@@ -80,13 +95,10 @@ constexpr size_t tx_buffer_frames = 16;
 /// Bytes read per read() call.
 constexpr size_t rx_chunk = 4096;
 
-// -- helpers ---------------------------------------------------------------------
+/// read() calls per readiness callback at most.
+constexpr int rx_reads_per_turn = 4;
 
-int64_t now_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
+// -- helpers ---------------------------------------------------------------------
 
 /// The termios constant of a standard rate (serial::standard_bauds).
 speed_t to_speed(uint64_t baud) {
@@ -155,7 +167,7 @@ int apply_termios(int fd, const serial::settings& set, std::string& what) {
     tio.c_cc[VSTART] = serial::xon;
     tio.c_cc[VSTOP] = serial::xoff;
   }
-  // poll() reports input from one byte on; reads never wait (O_NONBLOCK).
+  // epoll reports input from one byte on; reads never wait (O_NONBLOCK).
   tio.c_cc[VMIN] = 1;
   tio.c_cc[VTIME] = 0;
   auto speed = to_speed(set.baud);
@@ -194,69 +206,85 @@ int apply_termios(int fd, const serial::settings& set, std::string& what) {
 
 class serial_driver final : public link_driver {
 public:
-  /// Takes ownership of `fd` (the configured tty) and `wake_fd` (eventfd).
-  serial_driver(serial::settings set, int fd, int wake_fd)
+  /// Takes ownership of `fd` (the configured, non-blocking tty).
+  serial_driver(serial::settings set, int fd)
     : set_(std::move(set)),
       prefix_("device '" + set_.device + "': "),
       fd_(fd),
-      wake_fd_(wake_fd),
       tx_capacity_(tx_buffer_frames
                    * serial::max_wire_size(set_.profile.mtu, set_.escaped())),
       baud_(set_.baud),
       bandwidth_(set_.profile.bandwidth_bps),
-      char_ns_(char_time_ns(set_.format, set_.baud)) {
+      char_ns_(char_time_ns(set_.format, set_.baud)),
+      dec_(set_.profile.mtu, set_.escaped()),
+      rx_buf_(rx_chunk) {
     tx_.reserve(tx_capacity_);
   }
 
-  /// Must not run on the IO thread (i.e. the handler must not drop the last
-  /// reference to its driver).
+  /// Must not run inside a handler call of this driver (i.e. the handler
+  /// must not drop the last reference to its driver).
   ~serial_driver() override {
     stop();
   }
 
   // -- link_driver -------------------------------------------------------------
 
+  /// Watches the tty on `loop`; see the file comment for the contract.
   caf::error start(std::shared_ptr<frame_handler> handler,
-                   event_loop&) override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (state_ != state::opened)
-      return fail(ec::device_unavailable, state_ == state::running
-                                            ? "already started"
-                                            : "already stopped");
-    if (!handler)
-      return fail(ec::invalid_parameter, "start needs a frame handler");
-    handler_ = std::move(handler);
-    if (auto why = posix::start_thread(thread_, "IO", [this] { run(); })) {
-      handler_.reset();
-      return fail(ec::device_unavailable, *why);
-    }
-    state_ = state::running;
-    return caf::none;
+                   event_loop& loop) override {
+    caf::error result;
+    loop.run_sync([&] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ != state::opened) {
+        result = fail(ec::device_unavailable, state_ == state::running
+                                                ? "already started"
+                                                : "already stopped");
+        return;
+      }
+      if (!handler) {
+        result = fail(ec::invalid_parameter, "start needs a frame handler");
+        return;
+      }
+      std::lock_guard<std::mutex> tx_guard{tx_mtx_};
+      // Bytes sent before start wait for the line.
+      out_armed_ = tx_head_ < tx_.size();
+      if (auto err = loop.watch(fd_, out_armed_ ? EPOLLIN | EPOLLOUT : EPOLLIN,
+                                [this](uint32_t events) { on_ready(events); })) {
+        out_armed_ = false;
+        result = fail(ec::device_unavailable,
+                      "cannot watch the line: " + render(err));
+        return;
+      }
+      handler_ = std::move(handler);
+      loop_ = &loop;
+      state_ = state::running;
+    });
+    return result;
   }
 
-  /// Joins the IO thread and closes the line. Bytes not yet on the wire
-  /// (driver buffer and kernel output queue) are discarded, so that closing
-  /// never waits for a stalled line.
+  /// Closes the line. Bytes not yet on the wire (driver buffer and kernel
+  /// output queue) are discarded, so that closing never waits for a
+  /// stalled line.
   void stop() override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (state_ == state::stopped)
-      return;
-    stopping_ = true;
-    if (!posix::wake_and_join(thread_, wake_fd_))
-      return; // Called from a handler: the loop ends after this callback.
-    handler_.reset();
+    event_loop* loop;
     {
-      std::lock_guard<std::mutex> tx_guard{tx_mtx_};
-      tx_.clear();
-      tx_head_ = 0;
-      // Errors are irrelevant here (e.g. the line hung up already).
-      ::tcflush(fd_, TCIOFLUSH);
-      ::close(fd_); // also releases the flock
-      fd_ = -1;
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ == state::stopped)
+        return;
+      if (state_ == state::opened) { // never started: nothing is watched
+        close_line();
+        return;
+      }
+      loop = loop_;
     }
-    ::close(wake_fd_);
-    wake_fd_ = -1;
-    state_ = state::stopped;
+    loop->run_sync([this] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ != state::running)
+        return; // another stop came first
+      loop_->unwatch(fd_);
+      close_line();
+      handler_.reset();
+    });
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -298,13 +326,13 @@ public:
     ++tx_frames_;
     tx_bytes_ += n;
     if (pending > 0)
-      return caf::none; // The IO thread is already waiting for POLLOUT.
+      return caf::none; // EPOLLOUT is watched (or will be) already.
     auto err = write_pending();
     if (err != 0 && err != EAGAIN)
       return fail(ec::device_failed,
                   "serial line " + set_.path + ": " + errno_text(err));
     if (tx_head_ < tx_.size())
-      wake(); // Poll for POLLOUT from now on.
+      watch_output();
     return caf::none;
   }
 
@@ -419,8 +447,39 @@ private:
     return make_error(code, prefix_ + what);
   }
 
-  void wake() {
-    posix::signal_eventfd(wake_fd_);
+  /// Ends delivery and closes the line. Requires life_mtx_; on the loop
+  /// thread once started.
+  void close_line() {
+    stopping_ = true;
+    *alive_ = false;
+    state_ = state::stopped;
+    std::lock_guard<std::mutex> tx_guard{tx_mtx_};
+    tx_.clear();
+    tx_head_ = 0;
+    out_armed_ = false;
+    // Errors are irrelevant here (e.g. the line hung up already).
+    ::tcflush(fd_, TCIOFLUSH);
+    ::close(fd_); // also releases the flock
+    fd_ = -1;
+  }
+
+  /// Has the loop watch for EPOLLOUT while bytes wait. Requires tx_mtx_;
+  /// any thread.
+  void watch_output() {
+    if (out_armed_ || loop_ == nullptr || failed_)
+      return; // loop_ is null before start: start watches EPOLLOUT then.
+    out_armed_ = true;
+    if (loop_->in_loop_thread()) {
+      loop_->modify(fd_, EPOLLIN | EPOLLOUT);
+      return;
+    }
+    loop_->post([this, alive = alive_] {
+      if (!*alive)
+        return;
+      std::lock_guard<std::mutex> guard{tx_mtx_};
+      if (out_armed_ && !failed_)
+        loop_->modify(fd_, EPOLLIN | EPOLLOUT);
+    });
   }
 
   /// Writes buffered bytes until the tty takes no more. Returns 0, EAGAIN
@@ -442,60 +501,35 @@ private:
     return 0;
   }
 
-  // -- IO thread -------------------------------------------------------------------
+  // -- the loop thread -----------------------------------------------------------
 
-  void run() {
-    pthread_setname_np(pthread_self(), "herm-serial");
-    serial::decoder dec{set_.profile.mtu, set_.escaped()};
-    std::vector<uint8_t> buf(rx_chunk);
-    while (!stopping_) {
-      short events = POLLIN;
+  /// The tty's readiness callback.
+  void on_ready(uint32_t events) {
+    // Keeps the handler alive should it stop the driver during a call.
+    auto keep = handler_;
+    // Input first: bytes that arrived before a hangup are delivered.
+    if ((events & (EPOLLIN | EPOLLHUP | EPOLLERR)) != 0 && !read_input())
+      return;
+    if ((events & EPOLLOUT) != 0) {
+      int err;
       {
         std::lock_guard<std::mutex> guard{tx_mtx_};
-        if (tx_head_ < tx_.size())
-          events |= POLLOUT;
-      }
-      pollfd fds[2] = {{fd_, events, 0}, {wake_fd_, POLLIN, 0}};
-      if (::poll(fds, 2, -1) < 0) {
-        if (errno == EINTR)
-          continue;
-        report_failure("poll failed: " + errno_text(errno));
-        return;
-      }
-      if (fds[1].revents != 0) {
-        uint64_t count;
-        [[maybe_unused]] auto n = ::read(wake_fd_, &count, sizeof(count));
-        if (stopping_)
-          return;
-      }
-      auto ev = fds[0].revents;
-      if ((ev & POLLNVAL) != 0) {
-        report_failure(errno_text(EBADF));
-        return;
-      }
-      // Input first: bytes that arrived before a hangup are delivered.
-      if ((ev & (POLLIN | POLLHUP | POLLERR)) != 0 && !read_input(dec, buf))
-        return;
-      if ((ev & POLLOUT) != 0) {
-        int err;
-        {
-          std::lock_guard<std::mutex> guard{tx_mtx_};
-          err = write_pending();
-        }
-        if (err != 0 && err != EAGAIN) {
-          report_failure(errno_text(err));
-          return;
+        err = write_pending();
+        if (err == 0 && out_armed_) {
+          out_armed_ = false;
+          loop_->modify(fd_, EPOLLIN);
         }
       }
-      if ((ev & (POLLHUP | POLLERR)) != 0) {
-        report_failure("hangup");
-        return;
-      }
+      if (err != 0 && err != EAGAIN)
+        return report_failure(errno_text(err));
     }
+    if ((events & (EPOLLHUP | EPOLLERR)) != 0)
+      report_failure("hangup");
   }
 
-  /// Reads until the tty has nothing more. False after a failure (reported).
-  bool read_input(serial::decoder& dec, std::vector<uint8_t>& buf) {
+  /// Reads what the tty has, at most rx_reads_per_turn chunks. False after a
+  /// failure (reported) or when the handler stopped the driver.
+  bool read_input() {
     auto on_frame = [this](const uint8_t* data, size_t size) {
       ++rx_frames_;
       if (!stopping_)
@@ -506,12 +540,17 @@ private:
       if (!stopping_)
         handler_->on_malformed(self_addr, to_string(why));
     };
-    while (!stopping_) {
-      auto n = ::read(fd_, buf.data(), buf.size());
+    for (int i = 0; i < rx_reads_per_turn; ++i) {
+      auto n = ::read(fd_, rx_buf_.data(), rx_buf_.size());
       if (n > 0) {
         rx_bytes_ += static_cast<uint64_t>(n);
-        dec.feed(buf.data(), static_cast<size_t>(n), on_frame, on_malformed);
-        rx_idle_.store(dec.stats().idle);
+        dec_.feed(rx_buf_.data(), static_cast<size_t>(n), on_frame,
+                  on_malformed);
+        rx_idle_.store(dec_.stats().idle);
+        if (stopping_)
+          return false;
+        if (static_cast<size_t>(n) < rx_buf_.size())
+          return true; // the tty had no more
         continue;
       }
       if (n == 0) { // a hung-up tty reads as end of file
@@ -529,10 +568,17 @@ private:
     return true;
   }
 
-  /// Reports the end of the line once; the IO thread ends right after.
+  /// Reports the end of the line once and stops watching the tty.
   void report_failure(const std::string& what) {
-    if (failed_.exchange(true) || stopping_)
+    if (stopping_)
       return;
+    {
+      std::lock_guard<std::mutex> guard{tx_mtx_};
+      if (failed_.exchange(true))
+        return;
+      out_armed_ = false;
+    }
+    loop_->unwatch(fd_);
     handler_->on_failure(
       fail(ec::device_failed, "serial line " + set_.path + ": " + what));
   }
@@ -542,10 +588,10 @@ private:
   const serial::settings set_;
   const std::string prefix_; // "device 'NAME': "
 
-  /// Guards fd_ against closing, the transmit buffer and the line timing.
+  /// Guards fd_ against closing, the transmit buffer, the line timing and
+  /// whether EPOLLOUT is watched.
   mutable std::mutex tx_mtx_;
   int fd_;
-  int wake_fd_;
   /// Encoded bytes not yet taken by the tty: tx_[tx_head_ ..).
   std::vector<uint8_t> tx_;
   size_t tx_head_ = 0;
@@ -553,19 +599,31 @@ private:
   /// When the line will have clocked out everything written so far (an
   /// estimate from the baud rate, CLOCK_MONOTONIC ns).
   int64_t busy_until_ = 0;
+  /// EPOLLOUT is watched, or a task that watches it is posted.
+  bool out_armed_ = false;
 
   // Run-time parameters (set_param).
   std::atomic<uint64_t> baud_;
   std::atomic<uint64_t> bandwidth_;
   std::atomic<int64_t> char_ns_;
 
-  // Lifecycle.
+  // Life cycle. life_mtx_ guards state_, loop_ (written under tx_mtx_ too
+  // by start) and handler_; it is never held across run_sync nor during a
+  // handler call.
   std::mutex life_mtx_;
   state state_ = state::opened;
+  event_loop* loop_ = nullptr;
+  /// Set by stop (on the loop thread once started): delivery ends at once.
   std::atomic<bool> stopping_{false};
   std::atomic<bool> failed_{false};
-  std::thread thread_;
+  /// Cleared by stop; tasks posted to the loop check it first.
+  std::shared_ptr<std::atomic<bool>> alive_
+    = std::make_shared<std::atomic<bool>>(true);
   std::shared_ptr<frame_handler> handler_;
+
+  // The loop thread's once started.
+  serial::decoder dec_;
+  std::vector<uint8_t> rx_buf_;
 
   // Counters (get_param).
   std::atomic<uint64_t> tx_frames_{0};
@@ -663,13 +721,8 @@ caf::expected<link_driver_ptr> open_serial(const device_config& cfg) {
     return fail(what + ": " + errno_text(err));
   // Whatever arrived before the line was configured is noise.
   ::tcflush(fd.get(), TCIOFLUSH);
-  unique_fd wake{::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)};
-  if (wake.get() < 0)
-    return fail("cannot create an eventfd: " + errno_text(errno));
-  auto drv = std::make_shared<serial_driver>(std::move(*set), fd.get(),
-                                             wake.get());
+  auto drv = std::make_shared<serial_driver>(std::move(*set), fd.get());
   fd.release();
-  wake.release();
   return link_driver_ptr{std::move(drv)};
 }
 

@@ -27,6 +27,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstring>
@@ -269,14 +270,17 @@ struct station {
       drv->stop();
   }
 
+  /// Opens and starts the driver on `loop` (default: the process's shared
+  /// loop).
   testing::AssertionResult open(const std::string& name,
                                 const std::string& path,
-                                option_map options = {}) {
+                                option_map options = {},
+                                event_loop* loop = nullptr) {
     auto res = open_serial(serial_config(name, path, std::move(options)));
     if (!res)
       return testing::AssertionFailure() << render(res.error());
     drv = std::move(*res);
-    if (auto err = drv->start(rec))
+    if (auto err = loop != nullptr ? drv->start(rec, *loop) : drv->start(rec))
       return testing::AssertionFailure() << render(err);
     return testing::AssertionSuccess();
   }
@@ -784,9 +788,9 @@ size_t count_entries(const char* dir) {
   return n;
 }
 
-/// Threads of this process whose name starts with "herm-" (driver IO
-/// threads are "herm-serial", the cable's relay is "herm-relay"). Sanitizer
-/// runtimes start threads of their own, so all threads are not counted.
+/// Threads of this process whose name starts with "herm-" (the cable's relay
+/// is "herm-relay"; drivers own none). Sanitizer runtimes start threads of
+/// their own, so all threads are not counted.
 size_t count_herm_threads() {
   size_t n = 0;
   if (auto* d = ::opendir("/proc/self/task")) {
@@ -976,6 +980,94 @@ TEST_F(serial_driver, stops_once_and_refuses_to_send_afterwards) {
             static_cast<ssize_t>(in.size()));
   std::this_thread::sleep_for(50ms);
   EXPECT_TRUE(s.rec->payloads().empty());
+  EXPECT_TRUE(s.rec->failures().empty());
+}
+
+// -- serial_driver: the event loop ---------------------------------------------------
+
+/// One encoded frame carrying 00 48 69, as the line delivers it.
+const byte_buffer wire_frame = bytes({0x01, 0x05, 0x48, 0x69, 0xB5, 0x76, 0x00});
+
+TEST_F(serial_driver, hands_frames_to_the_handler_on_the_loop_thread_only) {
+  raw_pty pty;
+  if (!pty.ok)
+    GTEST_SKIP() << "no pseudo-terminals: " << pty.error;
+  auto io = io_thread::make();
+  ASSERT_TRUE(io) << render(io.error());
+  auto& loop = (*io)->loop();
+  station s;
+  std::atomic<size_t> elsewhere{0};
+  s.rec->on_each_frame([&](const recorder::frame&) {
+    if (!loop.in_loop_thread())
+      ++elsewhere;
+  });
+  ASSERT_TRUE(s.open("tty0", pty.p.path, {}, &loop));
+  for (int i = 0; i < 5; ++i)
+    ASSERT_EQ(::write(pty.p.master, wire_frame.data(), wire_frame.size()),
+              static_cast<ssize_t>(wire_frame.size()));
+  ASSERT_TRUE(s.rec->wait_frames(5));
+  s.drv->stop();
+  EXPECT_EQ(elsewhere.load(), 0u);
+}
+
+TEST_F(serial_driver, stop_from_a_handler_with_frames_queued_delivers_no_further_frame) {
+  raw_pty pty;
+  if (!pty.ok)
+    GTEST_SKIP() << "no pseudo-terminals: " << pty.error;
+  // No thread runs this loop: the test turns it.
+  auto made = event_loop::make();
+  ASSERT_TRUE(made) << render(made.error());
+  auto& loop = **made;
+  station s;
+  s.rec->on_each_frame([&](const recorder::frame&) { s.drv->stop(); });
+  auto res = open_serial(serial_config("tty0", pty.p.path));
+  ASSERT_TRUE(res) << render(res.error());
+  s.drv = *res;
+  // Five frames wait in the tty before the first callback reads them.
+  byte_buffer five;
+  for (int i = 0; i < 5; ++i)
+    five.insert(five.end(), wire_frame.begin(), wire_frame.end());
+  ASSERT_EQ(::write(pty.p.master, five.data(), five.size()),
+            static_cast<ssize_t>(five.size()));
+  ASSERT_FALSE(s.drv->start(s.rec, loop));
+  auto deadline = clock_type::now() + wait_limit;
+  while (s.rec->frames().empty() && clock_type::now() < deadline)
+    loop.run_once(10'000'000);
+  for (int turn = 0; turn < 5; ++turn)
+    loop.run_once(10'000'000);
+  EXPECT_EQ(s.rec->payloads(), std::vector<byte_buffer>{bytes({0x00, 0x48, 0x69})});
+  EXPECT_EQ(loop.watched(), 0u);
+  EXPECT_TRUE(s.rec->failures().empty());
+}
+
+TEST_F(serial_driver, stop_from_another_thread_while_frames_arrive_returns_after_the_last_handler_call) {
+  raw_pty pty;
+  if (!pty.ok)
+    GTEST_SKIP() << "no pseudo-terminals: " << pty.error;
+  station s;
+  std::atomic<bool> returned{false};
+  std::atomic<size_t> late{0};
+  s.rec->on_each_frame([&](const recorder::frame&) {
+    if (returned)
+      ++late;
+  });
+  ASSERT_TRUE(s.open("tty0", pty.p.path));
+  std::atomic<bool> done{false};
+  std::thread writer{[&] {
+    // The master is non-blocking: a full tty drops what does not fit.
+    for (size_t after = 0; after < 200; after += done ? 1 : 0) {
+      [[maybe_unused]] auto n = ::write(pty.p.master, wire_frame.data(),
+                                        wire_frame.size());
+      std::this_thread::yield();
+    }
+  }};
+  bool arrived = s.rec->wait_frames(10);
+  s.drv->stop();
+  returned = true;
+  done = true;
+  writer.join();
+  ASSERT_TRUE(arrived);
+  EXPECT_EQ(late.load(), 0u);
   EXPECT_TRUE(s.rec->failures().empty());
 }
 
@@ -1203,12 +1295,12 @@ void exchange_both_ways(uint64_t baud, size_t count) {
   auto rate = std::to_string(baud);
   ASSERT_TRUE(a.open("a0", cable->path_a(), {{"baud", rate}}));
   ASSERT_TRUE(b.open("b0", cable->path_b(), {{"baud", rate}}));
-  // Two IO threads and the relay, once they named themselves (the fixture
-  // checks that they are gone later).
+  // The relay, once it named itself (the fixture checks that it is gone
+  // later); the drivers run on the shared event loop and own no thread.
   auto deadline = clock_type::now() + wait_limit;
-  while (count_herm_threads() < 3 && clock_type::now() < deadline)
+  while (count_herm_threads() < 1 && clock_type::now() < deadline)
     std::this_thread::sleep_for(1ms);
-  EXPECT_EQ(count_herm_threads(), 3u);
+  EXPECT_EQ(count_herm_threads(), 1u);
   std::vector<byte_buffer> from_a;
   std::vector<byte_buffer> from_b;
   for (size_t i = 0; i < count; ++i) {
