@@ -360,11 +360,13 @@ public:
 
   void scheduler(const field& f, file_config& cfg) const {
     auto fs = entries(f.value, f.path, f.key_line, "a map",
-                      {"policy", "threads"});
+                      {"policy", "threads", "busy_poll_us"});
     if (auto* x = find(fs, "scheduler.policy"))
       cfg.scheduler = choice(*x, {"loop", "sharing", "stealing"});
     if (auto* x = find(fs, "scheduler.threads"))
       cfg.threads = static_cast<size_t>(integer(*x, 0, 256));
+    if (auto* x = find(fs, "scheduler.busy_poll_us"))
+      cfg.busy_poll_us = static_cast<size_t>(integer(*x, 0, 100000));
   }
 
   /// Pre-shared key authentication of the network (routing/auth.hpp). The

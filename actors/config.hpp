@@ -56,6 +56,8 @@ struct file_config {
   /// Worker threads of "sharing" and "stealing"; 0: one per core (CAF's
   /// default). One by default, see configure() in actors/runtime/system.hpp.
   size_t threads = 1;
+  /// The loop scheduler's busy-poll before it sleeps, microseconds; 0: off.
+  size_t busy_poll_us = 0;
   /// Path of the local control socket; empty: none.
   std::string control_socket;
   /// The file it came from.

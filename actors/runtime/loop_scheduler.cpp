@@ -3,6 +3,7 @@
 #include <pthread.h>
 
 #include <atomic>
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -17,6 +18,7 @@
 #include "caf/detail/simple_actor_clock.hpp"
 #include "caf/execution_unit.hpp"
 #include "caf/resumable.hpp"
+#include "caf/settings.hpp"
 #include "caf/scheduler/abstract_coordinator.hpp"
 
 #include "channels/error.hpp"
@@ -25,6 +27,8 @@
 namespace herm {
 
 namespace {
+
+constexpr const char* busy_poll_key = "herm.busy-poll-us";
 
 /// CAF's simple clock behind a mutex. The loop thread asks it for the next
 /// due time before it sleeps and fires what is due after each wait; another
@@ -169,6 +173,9 @@ public:
   void init(caf::actor_system_config& cfg) override {
     super::init(cfg);
     num_workers_ = 1;
+    busy_poll_ns_ = static_cast<int64_t>(
+                      caf::get_or(cfg, busy_poll_key, size_t{0}))
+                    * 1000;
     if (!caf::get_if<size_t>(&static_cast<const caf::actor_system_config&>(cfg),
                              "scheduler.max-throughput"))
       max_throughput_ = default_throughput;
@@ -204,6 +211,7 @@ public:
     s.foreign_enqueues = foreign_enqueues_.load(std::memory_order_relaxed);
     s.sleeps = loop_->sleeps();
     s.wakes = loop_->wakes();
+    s.busy_polls = busy_polls_.load(std::memory_order_relaxed);
     return s;
   }
 
@@ -222,11 +230,42 @@ private:
       run_ready();
       drain_foreign();
       auto wait = ready_.empty() ? clock_.wait_ns() : 0;
+      if (wait > 0 && busy_poll_ns_ > 0 && busy_poll())
+        wait = 0;
       loop_->run_once(wait);
       clock_.fire_due();
     }
     loop_->leave_thread();
     super::system().thread_terminates();
+  }
+
+  /// Polls the descriptors and the foreign queue without sleeping for up to
+  /// busy_poll_ns_ (or until a timer is due), so that a packet arriving
+  /// soon after the last one finds the thread awake. Returns whether work
+  /// turned up. Spins only while fewer loops of this process spin than
+  /// there are cores.
+  bool busy_poll() {
+    static std::atomic<unsigned> spinning{0};
+    static const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+    if (spinning.fetch_add(1) >= cores) {
+      spinning.fetch_sub(1);
+      return false;
+    }
+    auto until = posix_now() + std::min(busy_poll_ns_, clock_.wait_ns());
+    bool found = false;
+    while (!found && posix_now() < until && !loop_->stop_requested()) {
+      found = loop_->run_once(0) > 0 || foreign_count_.load() > 0
+              || !ready_.empty();
+      busy_polls_.fetch_add(1, std::memory_order_relaxed);
+    }
+    spinning.fetch_sub(1);
+    return found;
+  }
+
+  static int64_t posix_now() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
   }
 
   void drain_foreign() {
@@ -271,12 +310,16 @@ private:
   std::atomic<size_t> foreign_count_{0};
   std::atomic<uint64_t> foreign_enqueues_{0};
   std::atomic<uint64_t> resumes_{0};
+  std::atomic<uint64_t> busy_polls_{0};
+  int64_t busy_poll_ns_ = 0;
 };
 
 } // namespace
 
-void load_loop_scheduler(caf::actor_system_config& cfg) {
+void load_loop_scheduler(caf::actor_system_config& cfg, size_t busy_poll_us) {
   cfg.load<loop_coordinator>();
+  // Straight into the settings: CAF refuses set() for undeclared options.
+  caf::put(cfg.content, busy_poll_key, busy_poll_us);
 }
 
 loop_stats loop_stats_of(caf::actor_system& sys) {

@@ -13,6 +13,7 @@
 // detached (caf::detached: a thread of its own) so that it does not stall the
 // loop (docs/user-guide.md, "Blocking work").
 
+#include <cstddef>
 #include <cstdint>
 
 #include "caf/fwd.hpp"
@@ -24,7 +25,15 @@ namespace herm {
 /// named "herm-loop". `scheduler.max-throughput` bounds the messages an
 /// actor handles per turn (default here: 64, so that a busy actor cannot
 /// keep the loop from its descriptors).
-void load_loop_scheduler(caf::actor_system_config& cfg);
+///
+/// `busy_poll_us` > 0: before the loop sleeps it polls its descriptors and
+/// queue for up to that many microseconds (bounded by the next timer), so
+/// that a packet arriving soon after the last finds the thread awake instead
+/// of waking a halted vCPU; it burns that much CPU after every burst of
+/// work. At most one spinning loop per core in a process; off (0) by
+/// default. docs/performance.md measures its effect.
+void load_loop_scheduler(caf::actor_system_config& cfg,
+                         size_t busy_poll_us = 0);
 
 /// What the loop scheduler of `sys` did so far; all zero when `sys` runs on
 /// another scheduler. For tests and benchmarks.
@@ -33,6 +42,7 @@ struct loop_stats {
   uint64_t foreign_enqueues = 0; // actors made ready by another thread
   uint64_t sleeps = 0;         // waits in epoll that blocked
   uint64_t wakes = 0;          // eventfd writes to end such a wait
+  uint64_t busy_polls = 0;     // polls made while busy-polling
 };
 loop_stats loop_stats_of(caf::actor_system& sys);
 

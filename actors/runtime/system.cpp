@@ -31,14 +31,15 @@ void register_types(caf::actor_system_config& cfg) {
 } // namespace
 
 void configure(caf::actor_system_config& cfg,
-               const std::string& scheduler_policy, size_t threads) {
+               const std::string& scheduler_policy, size_t threads,
+               size_t busy_poll_us) {
   register_types(cfg);
   if (scheduler_policy == "stealing")
     cfg.set("scheduler.policy", caf::atom("stealing"));
   else if (scheduler_policy == "sharing")
     cfg.set("scheduler.policy", caf::atom("sharing"));
   else
-    load_loop_scheduler(cfg);
+    load_loop_scheduler(cfg, busy_poll_us);
   if (threads > 0)
     cfg.set("scheduler.max-threads", threads);
   cfg.set("logger.verbosity", caf::atom("quiet"));

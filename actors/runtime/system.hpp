@@ -18,10 +18,11 @@ namespace herm {
 /// default, about 100 us per cross-thread wake-up here); see
 /// docs/performance.md. `threads` is the number of worker threads of
 /// "sharing" and "stealing" (0: one per core); the loop scheduler has one.
-/// On any of them, spawn blocking work as detached actors.
+/// On any of them, spawn blocking work as detached actors. `busy_poll_us`:
+/// the loop scheduler's bounded busy-poll (load_loop_scheduler), 0: off.
 void configure(caf::actor_system_config& cfg,
                const std::string& scheduler_policy = "loop",
-               size_t threads = 1);
+               size_t threads = 1, size_t busy_poll_us = 0);
 
 /// Like `configure`, but for deterministic tests: CAF's test_coordinator
 /// drives every actor, and time moves only when the test advances it.

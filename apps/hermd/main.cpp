@@ -584,7 +584,7 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
 
   caf::actor_system_config sys_cfg;
-  configure(sys_cfg, cfg->scheduler, cfg->threads);
+  configure(sys_cfg, cfg->scheduler, cfg->threads, cfg->busy_poll_us);
   hermd::add_apo_types(sys_cfg);
   caf::actor_system sys{sys_cfg};
   module_daemon d{sys, *cfg, fault_injection};

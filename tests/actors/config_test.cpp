@@ -128,7 +128,7 @@ module:
   hold_factor: 4
   announce_every: 20
 log: { level: debug, format: json }
-scheduler: { policy: stealing, threads: 4 }
+scheduler: { policy: stealing, threads: 4, busy_poll_us: 50 }
 control: { socket: /tmp/x/main.sock }
 apps:
   tick_ms: 50
@@ -280,6 +280,7 @@ TEST(config, parses_every_section_of_a_full_file_into_the_structs) {
   EXPECT_EQ(cfg.log_format, "json");
   EXPECT_EQ(cfg.scheduler, "stealing");
   EXPECT_EQ(cfg.threads, 4u);
+  EXPECT_EQ(cfg.busy_poll_us, 50u);
   EXPECT_EQ(cfg.control_socket, "/tmp/x/main.sock");
   auto& a = cfg.module.apps;
   EXPECT_EQ(a.tick, 50ms);
@@ -409,6 +410,7 @@ TEST(config, fills_everything_but_the_name_with_defaults) {
   EXPECT_EQ(cfg.log_format, "text");
   EXPECT_EQ(cfg.scheduler, "loop");
   EXPECT_EQ(cfg.threads, 1u);
+  EXPECT_EQ(cfg.busy_poll_us, 0u);
   EXPECT_EQ(cfg.control_socket, default_control_socket("m"));
   EXPECT_TRUE(cfg.module.devices.empty());
   EXPECT_TRUE(cfg.device_lines.empty());
@@ -584,6 +586,10 @@ const error_case error_cases[] = {
    lines({"module: { name: m }", "scheduler:", "  threads: 257"}),
    "robot.yaml:3: scheduler.threads: expected an integer in [0, 256], got "
    "'257'"},
+  {"busy_poll_too_long",
+   lines({"module: { name: m }", "scheduler: { busy_poll_us: -1 }"}),
+   "robot.yaml:2: scheduler.busy_poll_us: expected an integer in [0, "
+   "100000], got '-1'"},
   {"control_socket_a_list",
    lines({"module: { name: m }", "control:", "  socket: [a, b]"}),
    "robot.yaml:3: control.socket: expected a socket path of at most 107 bytes "

@@ -213,6 +213,25 @@ TEST_F(loop_system, shuts_down_with_timeouts_and_messages_still_pending) {
   SUCCEED();
 }
 
+TEST(loop_scheduler, busy_polls_before_sleeping_when_configured_and_still_sleeps) {
+  caf::actor_system_config cfg;
+  configure(cfg, "loop", 1, 200); // 200 us
+  caf::actor_system sys{cfg};
+  auto threads = std::make_shared<std::set<std::thread::id>>();
+  auto mtx = std::make_shared<std::mutex>();
+  auto a = sys.spawn(adder, threads, mtx);
+  caf::scoped_actor self{sys};
+  for (int i = 0; i < 20; ++i)
+    self->request(a, 10s, i).receive([&](int y) { EXPECT_EQ(y, i + 1); },
+                                     [&](caf::error& err) {
+                                       FAIL() << sys.render(err);
+                                     });
+  std::this_thread::sleep_for(20ms); // idle: polls for 200 us, then sleeps
+  auto s = loop_stats_of(sys);
+  EXPECT_GT(s.busy_polls, 0u);
+  EXPECT_GT(s.sleeps, 0u);
+}
+
 TEST(loop_scheduler, stats_are_zero_on_another_scheduler) {
   caf::actor_system_config cfg;
   configure(cfg, "sharing", 1);

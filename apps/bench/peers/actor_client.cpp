@@ -103,7 +103,10 @@ caf::behavior rtt_client(rtt_client_actor* self, caf::actor target,
 
 void configure_actor_system(caf::actor_system_config& cfg, const std::string& policy) {
   auto [name, threads] = split_policy(policy);
-  configure(cfg, name, threads);
+  if (name == "loop")
+    configure(cfg, name, 1, threads); // "loop:US": busy-poll US microseconds
+  else
+    configure(cfg, name, threads);
   cfg.add_message_types<caf::id_block::herm_bench>();
 }
 

@@ -246,7 +246,9 @@ summary summarize(const case_result& c) {
 std::string policy_label(const std::string& policy) {
   auto [name, threads] = split_policy(policy);
   if (name == "loop")
-    return "loop scheduler (one thread runs the actors and the sockets)";
+    return threads == 0
+             ? "loop scheduler (one thread runs the actors and the sockets)"
+             : "loop scheduler, busy-polling " + std::to_string(threads) + " us";
   if (threads == 0)
     return name + " scheduler, one worker per core ("
            + std::to_string(std::thread::hardware_concurrency()) + ")";
@@ -327,7 +329,7 @@ int main(int argc, char** argv) {
   app.add_option("--only", only, "transports to run, comma-separated: udp,herm,caf,zmq,dds (default: all)");
   app.add_option("--modes", modes_arg, "modes to run, comma-separated: back-to-back,gap,oneway,inprocess,router (default: all)");
   app.add_option("--sizes", sizes_arg, "payload sizes in bytes of every mode (latency modes: 16,256,1400; oneway: 64)");
-  app.add_option("--policies", policies_arg, "schedulers for herm and caf, POLICY[:THREADS] (loop, sharing:1, sharing, stealing; loop = HERM's loop scheduler, sharing:1 = one worker, sharing = one per core)");
+  app.add_option("--policies", policies_arg, "schedulers for herm and caf, POLICY[:THREADS] (loop, loop:US, sharing:1, sharing, stealing; loop = HERM's loop scheduler, loop:50 = the same busy-polling 50 us before it sleeps, sharing:1 = one worker, sharing = one per core)");
   struct count_option {
     const char* name;
     uint32_t* value;

@@ -35,7 +35,8 @@ struct endpoint_params {
   std::string mode = "rtt";
   /// Scheduler for herm and caf: "loop" (HERM's loop scheduler), or CAF's
   /// "sharing" or "stealing", optionally with a worker count after a colon
-  /// ("sharing:1"; none: one per core).
+  /// ("sharing:1"; none: one per core); for "loop" the number after the
+  /// colon is its busy-poll in microseconds ("loop:50").
   std::string policy = "loop";
   /// udp, caf, zmq: the server's port (0: the server picks and prints it).
   /// herm: the server module's UDP port. dds: the DDS domain id.
