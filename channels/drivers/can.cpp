@@ -14,10 +14,21 @@
 //  * The emulated bus (interface "emu:/path/to/bus-directory"), for hosts
 //    without CAN: channels/drivers/can_emu.cpp.
 //
-// Threads: SocketCAN has one receive thread (poll on the socket and an
-// eventfd). send() never blocks beyond one non-blocking system call; the
-// frame_handler is called from the receive thread only, and on_failure at
-// most once.
+// Threading of SocketCAN (the event-loop contract, channels/event_loop.hpp):
+// the driver owns no thread. start() registers the socket with the module's
+// event loop (through run_sync, so any thread may call it); the readiness
+// callback reads at most max_reads_per_turn frames and returns to the loop
+// (level-triggered: called again next turn while frames wait), so a busy
+// bus cannot starve other links. The frame_handler is called on the loop
+// thread only, and on_failure at most once, after which the socket is no
+// longer watched. A send() that finds the interface gone posts the failure
+// report to the loop (a task that checks a shared alive flag first, so it
+// does nothing once the driver stopped or died). send() may be called from
+// any thread and never blocks beyond one non-blocking system call. stop() is
+// idempotent and may be called from any thread: on the loop thread
+// (run_sync) it unwatches and closes the socket and drops the handler; no
+// handler call follows its return. Called from a handler it ends delivery
+// at once: the callback sees stopping_ and touches the socket no more.
 
 #include <algorithm>
 #include <atomic>
@@ -25,15 +36,12 @@
 #include <cstring>
 #include <mutex>
 #include <shared_mutex>
+#include <memory>
 #include <string>
-#include <system_error>
-#include <thread>
 
 #include <net/if.h>
 #include <net/if_arp.h>
-#include <poll.h>
-#include <pthread.h>
-#include <sys/eventfd.h>
+#include <sys/epoll.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -47,6 +55,7 @@
 #include "channels/drivers/can_emu.hpp"
 #include "channels/drivers/can_id.hpp"
 #include "channels/drivers/posix.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
 
 namespace herm {
@@ -58,8 +67,8 @@ using can::can_driver;
 using posix::errno_text;
 using posix::unique_fd;
 
-/// Reads per wake-up of the receive thread.
-constexpr int max_reads_per_wakeup = 64;
+/// Frames read per readiness callback at most.
+constexpr int max_reads_per_turn = 64;
 
 /// Errors with which a CAN socket says its interface is gone or down.
 bool is_down_error(int err) {
@@ -73,7 +82,8 @@ public:
   explicit socketcan_driver(can_config cfg) : can_driver(std::move(cfg)) {
   }
 
-  /// Must not run on the receive thread.
+  /// Must not run inside a handler call of this driver (i.e. the handler
+  /// must not drop the last reference to its driver).
   ~socketcan_driver() override {
     stop();
   }
@@ -172,45 +182,61 @@ public:
         != 0)
       return fail(ec::device_unavailable, "cannot bind to '" + ifname
                                             + "': " + errno_text(errno));
-    wake_fd_.reset(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK));
-    if (!wake_fd_)
-      return fail(ec::device_unavailable,
-                  "cannot create eventfd: " + errno_text(errno));
     return caf::none;
   }
 
+  /// Watches the socket on `loop`; see the file comment for the contract.
   caf::error start(std::shared_ptr<frame_handler> handler,
-                   event_loop&) override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (state_ != state::opened)
-      return fail(ec::device_unavailable, state_ == state::running
-                                            ? "already started"
-                                            : "already stopped");
-    if (!handler)
-      return fail(ec::invalid_parameter, "start needs a frame handler");
-    handler_ = std::move(handler);
-    if (auto why = posix::start_thread(thread_, "receive",
-                                       [this] { receive_loop(); })) {
-      handler_.reset();
-      return fail(ec::device_unavailable, *why);
-    }
-    state_ = state::running;
-    return caf::none;
+                   event_loop& loop) override {
+    caf::error result;
+    loop.run_sync([&] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ != state::opened) {
+        result = fail(ec::device_unavailable, state_ == state::running
+                                                ? "already started"
+                                                : "already stopped");
+        return;
+      }
+      if (!handler) {
+        result = fail(ec::invalid_parameter, "start needs a frame handler");
+        return;
+      }
+      if (auto err = loop.watch(fd_.get(), EPOLLIN,
+                                [this](uint32_t events) { on_ready(events); })) {
+        result = fail(ec::device_unavailable,
+                      "cannot watch the socket: " + render(err));
+        return;
+      }
+      handler_ = std::move(handler);
+      loop_ = &loop;
+      state_ = state::running;
+      // A send() before start may have found the interface gone.
+      if (tx_down_errno_.load() != 0)
+        post_tx_failure();
+    });
+    return result;
   }
 
   void stop() override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (state_ == state::stopped && !thread_.joinable())
-      return;
-    state_ = state::stopped;
-    stopping_.store(true);
-    // From a handler the loop ends once the callback returns and still uses
-    // the descriptors: the next stop() or the destructor joins and closes.
-    if (!posix::wake_and_join(thread_, wake_fd_.get()))
-      return;
-    handler_.reset();
-    std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
-    fd_.reset();
+    event_loop* loop;
+    {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ == state::stopped)
+        return;
+      if (state_ == state::opened) { // never started: nothing is watched
+        close_socket();
+        return;
+      }
+      loop = loop_;
+    }
+    loop->run_sync([this] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (state_ != state::running)
+        return; // another stop came first
+      loop_.load()->unwatch(fd_.get());
+      close_socket();
+      handler_.reset();
+    });
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -241,10 +267,10 @@ public:
                                         + "' is full: " + errno_text(err));
         default:
           if (is_down_error(err)) {
-            // The receive thread reports the failure (once).
+            // Reported on the loop thread (once).
             int expected = 0;
-            tx_down_errno_.compare_exchange_strong(expected, err);
-            wake();
+            if (tx_down_errno_.compare_exchange_strong(expected, err))
+              post_tx_failure();
           }
           return fail(ec::device_failed, "cannot send on '" + cfg_.interface
                                            + "': " + errno_text(err));
@@ -267,13 +293,38 @@ public:
 private:
   enum class state { opened, running, stopped };
 
-  void wake() {
-    posix::signal_eventfd(wake_fd_.get());
+  bool delivery_ended() const override {
+    return stopping_.load();
   }
 
-  void report_failure(int err) {
-    if (stopping_.load())
+  /// Ends delivery and closes the socket. Requires life_mtx_; on the loop
+  /// thread once started.
+  void close_socket() {
+    stopping_ = true;
+    *alive_ = false;
+    state_ = state::stopped;
+    std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
+    fd_.reset();
+  }
+
+  /// Has the loop thread report tx_down_errno_. Requires fd_mtx_ (shared)
+  /// or life_mtx_; does nothing before start (start posts it then).
+  void post_tx_failure() {
+    auto* loop = loop_.load();
+    if (loop == nullptr)
       return;
+    loop->post([this, alive = alive_] {
+      if (*alive)
+        report_failure(tx_down_errno_.load());
+    });
+  }
+
+  /// Reports the failure once and stops watching the socket. Loop thread.
+  void report_failure(int err) {
+    if (stopping_.load() || failed_)
+      return;
+    failed_ = true;
+    loop_.load()->unwatch(fd_.get());
     std::string what = err == ENETDOWN
                          ? "interface '" + cfg_.interface + "' went down"
                        : err == ENODEV || err == ENXIO
@@ -283,70 +334,50 @@ private:
       fail(ec::device_failed, what + " (" + errno_text(err) + ")"));
   }
 
-  void receive_loop() {
-    pthread_setname_np(pthread_self(), "herm-can");
-    pollfd fds[2] = {{fd_.get(), POLLIN, 0}, {wake_fd_.get(), POLLIN, 0}};
+  // -- the loop thread -----------------------------------------------------------
+
+  /// The socket's readiness callback.
+  void on_ready(uint32_t events) {
+    // Keeps the handler alive should it stop the driver during a call.
+    auto keep = handler_;
+    if ((events & EPOLLERR) != 0) {
+      // raw_notify() sets ENETDOWN when the interface goes down and ENODEV
+      // when it is unregistered. Reading SO_ERROR clears it.
+      int err = 0;
+      socklen_t len = sizeof(err);
+      if (::getsockopt(fd_.get(), SOL_SOCKET, SO_ERROR, &err, &len) != 0)
+        err = errno;
+      if (err != 0)
+        return report_failure(err);
+    }
+    if ((events & EPOLLIN) == 0)
+      return;
     canfd_frame frame;
-    while (!stopping_.load()) {
-      if (auto err = tx_down_errno_.load()) {
-        report_failure(err);
-        return;
-      }
-      if (::poll(fds, 2, -1) < 0) {
-        if (errno == EINTR)
+    for (int i = 0; i < max_reads_per_turn; ++i) {
+      // SO_RXQ_OVFL: the socket's drop count (cumulative, modulo 2^32)
+      // rides on frames received after drops happened.
+      alignas(cmsghdr) char control[CMSG_SPACE(sizeof(uint32_t))];
+      iovec iov{&frame, sizeof(frame)};
+      msghdr msg{};
+      msg.msg_iov = &iov;
+      msg.msg_iovlen = 1;
+      msg.msg_control = control;
+      msg.msg_controllen = sizeof(control);
+      auto n = ::recvmsg(fd_.get(), &msg, MSG_DONTWAIT);
+      if (n < 0) {
+        auto err = errno;
+        if (err == EINTR)
           continue;
-        report_failure(errno);
-        return;
-      }
-      if (fds[1].revents != 0) {
-        uint64_t count;
-        [[maybe_unused]] auto res = ::read(wake_fd_.get(), &count,
-                                           sizeof(count));
-        continue; // re-check stopping_ and tx_down_errno_
-      }
-      auto ev = fds[0].revents;
-      if ((ev & POLLNVAL) != 0) {
-        report_failure(EBADF);
-        return;
-      }
-      if ((ev & POLLERR) != 0) {
-        // raw_notify() sets ENETDOWN when the interface goes down and ENODEV
-        // when it is unregistered. Reading SO_ERROR clears it.
-        int err = 0;
-        socklen_t len = sizeof(err);
-        if (::getsockopt(fd_.get(), SOL_SOCKET, SO_ERROR, &err, &len) != 0)
-          err = errno;
-        if (err != 0) {
-          report_failure(err);
+        if (err == EAGAIN || err == EWOULDBLOCK)
           return;
-        }
+        return report_failure(err);
       }
-      if ((ev & POLLIN) == 0)
-        continue;
-      for (int i = 0; i < max_reads_per_wakeup && !stopping_.load(); ++i) {
-        // SO_RXQ_OVFL: the socket's drop count (cumulative, modulo 2^32)
-        // rides on frames received after drops happened.
-        alignas(cmsghdr) char control[CMSG_SPACE(sizeof(uint32_t))];
-        iovec iov{&frame, sizeof(frame)};
-        msghdr msg{};
-        msg.msg_iov = &iov;
-        msg.msg_iovlen = 1;
-        msg.msg_control = control;
-        msg.msg_controllen = sizeof(control);
-        auto n = ::recvmsg(fd_.get(), &msg, MSG_DONTWAIT);
-        if (n >= 0)
-          note_drops(msg);
-        if (n < 0) {
-          auto err = errno;
-          if (err == EINTR)
-            continue;
-          if (err == EAGAIN || err == EWOULDBLOCK)
-            break;
-          report_failure(err);
-          return;
-        }
-        dispatch(*handler_, frame, static_cast<size_t>(n));
-      }
+      note_drops(msg);
+      if (stopping_.load())
+        return;
+      dispatch(*handler_, frame, static_cast<size_t>(n));
+      if (stopping_.load())
+        return;
     }
   }
 
@@ -366,13 +397,21 @@ private:
   /// Guards closing fd_ against concurrent send() calls.
   mutable std::shared_mutex fd_mtx_;
   unique_fd fd_;
-  unique_fd wake_fd_;
 
+  /// Guards the life cycle (start, stop); never held across run_sync nor
+  /// during a handler call.
   std::mutex life_mtx_;
   state state_ = state::opened;
+  /// Set by start; read by send() (post_tx_failure) on any thread.
+  std::atomic<event_loop*> loop_{nullptr};
+  /// Set by stop (on the loop thread once started): delivery ends at once.
   std::atomic<bool> stopping_{false};
+  /// on_failure was called (loop thread).
+  bool failed_ = false;
   std::atomic<int> tx_down_errno_{0};
-  std::thread thread_;
+  /// Cleared by stop; tasks posted to the loop check it first.
+  std::shared_ptr<std::atomic<bool>> alive_
+    = std::make_shared<std::atomic<bool>>(true);
   std::shared_ptr<frame_handler> handler_;
 };
 

@@ -258,12 +258,12 @@ void can_driver::error_frame(frame_handler& h, const canfd_frame& f) {
                "controller of " + cfg_.interface + " is bus-off");
     reported = true;
   }
-  if ((cls & CAN_ERR_RESTARTED) != 0) {
+  if ((cls & CAN_ERR_RESTARTED) != 0 && !delivery_ended()) {
     h.on_event(link_event_kind::bus_recovered, 0,
                "controller of " + cfg_.interface + " restarted");
     reported = true;
   }
-  if ((cls & CAN_ERR_CRTL) != 0) {
+  if ((cls & CAN_ERR_CRTL) != 0 && !delivery_ended()) {
     auto state = f.data[1];
     if (state == CAN_ERR_CRTL_ACTIVE) {
       h.on_event(link_event_kind::bus_recovered, 0,
@@ -288,7 +288,7 @@ void can_driver::error_frame(frame_handler& h, const canfd_frame& f) {
     reported = true;
   }
   auto rest = cls & ~(CAN_ERR_BUSOFF | CAN_ERR_RESTARTED | CAN_ERR_CRTL);
-  if (rest != 0 || !reported)
+  if ((rest != 0 || !reported) && !delivery_ended())
     h.on_event(link_event_kind::error_frame, 0,
                "error frame on " + cfg_.interface + " (class "
                  + hex(cls) + ")");

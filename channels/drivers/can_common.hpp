@@ -60,7 +60,8 @@ std::string hex(uint32_t x);
 
 /// The part of a can driver both backends share: profile, addressing,
 /// frame building and dispatch, common counters. Counters are atomics;
-/// dispatch and the handler calls run on the backend's receive thread.
+/// dispatch and the handler calls run where the backend receives (the
+/// event loop's thread).
 class can_driver : public link_driver {
 public:
   explicit can_driver(can_config cfg);
@@ -105,8 +106,14 @@ protected:
   void malformed(frame_handler& h, link_addr src, const std::string& why);
 
   /// Maps an error frame (CAN_ERR_FLAG, classes in linux/can/error.h) to
-  /// link events.
+  /// link events; stops between events once delivery_ended().
   void error_frame(frame_handler& h, const canfd_frame& f);
+
+  /// Whether the driver was stopped (from a handler call, say), so that
+  /// dispatch makes no further handler call. Default: never.
+  virtual bool delivery_ended() const {
+    return false;
+  }
 
   const can_config cfg_;
   const std::string prefix_;
