@@ -16,8 +16,7 @@
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
-#include <poll.h>
-#include <sys/eventfd.h>
+#include <sys/epoll.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
@@ -38,6 +37,7 @@
 #include "caf/scoped_actor.hpp"
 
 #include "channels/error.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/io_manager.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
@@ -58,16 +58,21 @@ using test::recorder;
 /// A point-to-point link between two drivers of one process: the two ends of
 /// a socketpair(AF_UNIX, SOCK_SEQPACKET), found by the device's interface
 /// name. The first device opened on a name is station 1, the second station
-/// 2. One receive thread per driver; empty frames are refused (a zero-length
-/// read is the peer's hangup).
+/// 2. Empty frames are refused (a zero-length read is the peer's hangup).
+///
+/// Like every driver it owns no thread: start() watches its socket on the
+/// event loop (run_sync: start may be called from any thread), the
+/// readiness callback reads a bounded batch and calls the handler on the
+/// loop thread, and stop() unwatches it there. The socket stays open until
+/// the destructor, so send() needs no lock against stop().
 class pair_driver : public link_driver {
 public:
   pair_driver(std::string name, int fd, link_addr self, link_profile profile)
     : prefix_("device '" + name + "': "),
       fd_(fd),
-      wake_fd_(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK)),
       self_(self),
-      profile_(std::move(profile)) {
+      profile_(std::move(profile)),
+      buf_(profile_.mtu) {
   }
 
   /// Must not run inside the driver's own handler call (nor may the last
@@ -75,33 +80,42 @@ public:
   ~pair_driver() override {
     stop();
     ::close(fd_);
-    ::close(wake_fd_);
   }
 
   caf::error start(std::shared_ptr<frame_handler> handler,
-                   event_loop&) override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (handler == nullptr)
-      return make_error(ec::invalid_parameter, prefix_ + "start needs a handler");
-    if (started_ || wake_fd_ < 0)
-      return make_error(ec::device_unavailable, prefix_ + "cannot start again");
-    started_ = true;
-    handler_ = std::move(handler);
-    thread_ = std::thread{[this] { run(); }};
-    return caf::none;
+                   event_loop& loop) override {
+    caf::error result;
+    loop.run_sync([&] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (handler == nullptr)
+        result = make_error(ec::invalid_parameter, prefix_ + "start needs a handler");
+      else if (started_)
+        result = make_error(ec::device_unavailable, prefix_ + "cannot start again");
+      else if (auto err = loop.watch(fd_, EPOLLIN, [this](uint32_t) { on_ready(); }))
+        result = make_error(ec::device_unavailable, prefix_ + render(err));
+      else {
+        handler_ = std::move(handler);
+        loop_ = &loop;
+      }
+      started_ = true;
+    });
+    return result;
   }
 
   void stop() override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    started_ = true; // a stopped driver never starts
-    stopping_ = true;
-    if (!thread_.joinable())
-      return;
-    if (thread_.get_id() == std::this_thread::get_id())
-      return; // from a handler: the loop ends when it returns
-    uint64_t one = 1;
-    [[maybe_unused]] auto n = ::write(wake_fd_, &one, sizeof(one));
-    thread_.join();
+    event_loop* loop;
+    {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      started_ = true; // a stopped driver never starts
+      if (stopping_.exchange(true) || loop_ == nullptr)
+        return;
+      loop = loop_;
+    }
+    loop->run_sync([this] {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      loop_->unwatch(fd_);
+      handler_.reset();
+    });
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -145,41 +159,44 @@ public:
   }
 
 private:
+  /// Frames read per readiness callback at most.
+  static constexpr int reads_per_turn = 16;
+
   link_addr peer() const {
     return 3 - self_;
   }
 
-  void run() {
-    byte_buffer buf(profile_.mtu);
-    while (!stopping_.load()) {
-      pollfd fds[2] = {{fd_, POLLIN, 0}, {wake_fd_, POLLIN, 0}};
-      if (::poll(fds, 2, -1) < 0 && errno != EINTR)
-        return handler_->on_failure(make_error(ec::device_failed, prefix_ + "poll"));
-      if (stopping_.load() || fds[0].revents == 0)
+  /// The socket's readiness callback (loop thread).
+  void on_ready() {
+    auto keep = handler_; // alive even if a handler call stops the driver
+    for (int i = 0; i < reads_per_turn && !stopping_.load(); ++i) {
+      auto n = ::recv(fd_, buf_.data(), buf_.size(), MSG_DONTWAIT | MSG_TRUNC);
+      if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+        return; // empty: the loop calls again when more arrives
+      if (n < 0 && errno == EINTR)
         continue;
-      auto n = ::recv(fd_, buf.data(), buf.size(), MSG_DONTWAIT | MSG_TRUNC);
-      if (n < 0 && (errno == EAGAIN || errno == EINTR))
-        continue;
-      if (n <= 0)
-        return handler_->on_failure(
+      if (n <= 0) {
+        loop_->unwatch(fd_); // a hung-up socket stays ready for ever
+        return keep->on_failure(
           make_error(ec::device_failed, prefix_ + "the peer hung up"));
-      if (static_cast<size_t>(n) > buf.size())
-        handler_->on_malformed(peer(), "pair: frame above the MTU");
+      }
+      if (static_cast<size_t>(n) > buf_.size())
+        keep->on_malformed(peer(), "pair: frame above the MTU");
       else
-        handler_->on_frame(peer(), buf.data(), static_cast<size_t>(n));
+        keep->on_frame(peer(), buf_.data(), static_cast<size_t>(n));
     }
   }
 
   std::string prefix_;
   int fd_;
-  int wake_fd_;
   link_addr self_;
   link_profile profile_;
+  byte_buffer buf_; // the loop thread's
   std::mutex life_mtx_;
   bool started_ = false;
+  event_loop* loop_ = nullptr;
   std::atomic<bool> stopping_{false};
   std::shared_ptr<frame_handler> handler_;
-  std::thread thread_;
 };
 
 /// Ends waiting for their second device, by interface name.
@@ -239,6 +256,9 @@ struct kind_defaults {
   static constexpr bool errors_name_the_device = true;
   /// inject_malformed works (a test can put bad bytes on the medium).
   static constexpr bool injects_malformed = false;
+  /// Handler calls happen on the event loop's thread (else on the
+  /// sender's: inproc).
+  static constexpr bool delivers_on_the_loop = true;
 
   std::string prepare() {
     return "";
@@ -440,6 +460,7 @@ struct inproc_kind : kind_defaults {
   static constexpr bool frame_counters = false;
   static constexpr bool malformed_counter = false;
   static constexpr bool stop_is_final = false;
+  static constexpr bool delivers_on_the_loop = false;
   static constexpr bool errors_name_the_device = false;
 
   device_config config(size_t i) const {
@@ -537,9 +558,11 @@ protected:
     return kind->open(kind_.config(i));
   }
 
-  /// Opens and starts every station; hooks[i] runs on each frame of i.
+  /// Opens and starts every station on `loop` (default: the process's
+  /// shared loop); hooks[i] runs on each frame of i.
   void start_all(
-    std::map<size_t, std::function<void(const recorder::frame&)>> hooks = {}) {
+    std::map<size_t, std::function<void(const recorder::frame&)>> hooks = {},
+    event_loop* loop = nullptr) {
     stations_.resize(Kind::stations);
     for (size_t i = 0; i < Kind::stations; ++i) {
       auto d = open(i);
@@ -547,7 +570,9 @@ protected:
       stations_[i].driver = *d;
       if (hooks.count(i) > 0)
         stations_[i].rec->on_each_frame(hooks[i]);
-      ASSERT_FALSE(stations_[i].driver->start(stations_[i].rec))
+      auto& st = stations_[i];
+      ASSERT_FALSE(loop != nullptr ? st.driver->start(st.rec, *loop)
+                                   : st.driver->start(st.rec))
         << "station " << i;
     }
   }
@@ -775,10 +800,35 @@ TYPED_TEST(driver_conformance, stop_from_inside_a_handler_ends_delivery_at_once)
   while (!stopped && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(1ms);
   ASSERT_TRUE(stopped) << "stop did not return inside the handler";
-  // Stopping again from outside waits for the receive thread, if any.
+  // Stopping again from outside is harmless.
   this->st(1).driver->stop();
   EXPECT_EQ(this->st(1).rec->payloads(), std::vector<byte_buffer>{bytes_of("first")});
   EXPECT_TRUE(this->st(1).rec->failures().empty());
+}
+
+TYPED_TEST(driver_conformance, calls_the_handler_on_the_loop_thread_it_was_started_on) {
+  auto io = io_thread::make();
+  ASSERT_TRUE(io) << render(io.error());
+  auto& loop = (*io)->loop();
+  std::atomic<size_t> on_loop{0};
+  std::atomic<size_t> elsewhere{0};
+  auto where = [&](const recorder::frame&) {
+    ++(loop.in_loop_thread() ? on_loop : elsewhere);
+  };
+  this->start_all({{0, where}, {1, where}}, &loop);
+  ASSERT_FALSE(this->st(0).send(this->dest(1), bytes_of("there")));
+  ASSERT_TRUE(this->st(1).rec->wait_frames(1));
+  ASSERT_FALSE(this->st(1).send(this->dest(0), bytes_of("back")));
+  ASSERT_TRUE(this->st(0).rec->wait_frames(1));
+  // Stopped before the loop's thread ends.
+  for (size_t i = 0; i < TypeParam::stations; ++i)
+    this->st(i).driver->stop();
+  if (TypeParam::delivers_on_the_loop) {
+    EXPECT_EQ(on_loop.load(), 2u);
+    EXPECT_EQ(elsewhere.load(), 0u);
+  } else {
+    EXPECT_EQ(on_loop.load() + elsewhere.load(), 2u);
+  }
 }
 
 TYPED_TEST(driver_conformance, stop_twice_is_harmless_and_final) {
