@@ -16,10 +16,16 @@
 // controller. Frame times are real CAN frame lengths at the configured bit
 // rate (can::frame_bits). See transmit_loop and docs/protocol.md.
 //
-// Threads: a transmit thread (arbitration, pacing, fan-out) and, after
-// start(), the medium's receive thread. send() never blocks beyond a mutex;
-// the frame_handler is called from the receive thread only, and on_failure
-// at most once.
+// Threads: receiving runs on the event loop given to start() (the
+// station's readiness callback and loop timers, emu_medium.hpp); the
+// frame_handler is called on the loop thread only, on_failure at most once.
+// Each driver keeps one transmit thread, the emulated bus itself:
+// arbitration (it naps between looks at the bus), pacing at the bit rate
+// and fan-out; a loop callback must not sleep like that. A fatal send
+// error reaches the loop with event_loop::post. send() never blocks beyond
+// a mutex. stop() (any thread, idempotent, also from a handler) unwatches
+// and cancels on the loop, joins the transmit thread and leaves the bus; no
+// handler call follows its return.
 
 #include "channels/drivers/can_emu.hpp"
 
@@ -125,7 +131,6 @@ const emu_medium::medium_spec bus_spec{
   /*self_is_peer=*/true, // error frames reach the sender too
   /*rcvbuf=*/1 << 20,
   /*sndbuf=*/0,
-  /*rx_thread_name=*/"herm-can-emu",
   {"bus", "an emulated CAN bus file", "emulated CAN socket",
    "emulated CAN bus", "emulated CAN bus file", " was removed",
    " was replaced"},
@@ -163,47 +168,53 @@ public:
   // -- link_driver ---------------------------------------------------------------
 
   caf::error start(std::shared_ptr<frame_handler> handler,
-                   event_loop&) override {
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (!handler)
-      return fail(ec::invalid_parameter, "start needs a frame handler");
-    if (stopped_)
-      return fail(ec::device_unavailable, "already stopped");
-    if (rx_thread_.joinable())
-      return fail(ec::device_unavailable, "already started");
-    handler_ = std::move(handler);
-    if (auto why = posix::start_thread(rx_thread_, "receive", [this] {
-          station_.receive_loop(wire::header_size + CANFD_MTU);
-        })) {
+                   event_loop& loop) override {
+    {
+      std::lock_guard<std::mutex> guard{life_mtx_};
+      if (!handler)
+        return fail(ec::invalid_parameter, "start needs a frame handler");
+      if (stopped_ || station_.stopping())
+        return fail(ec::device_unavailable, "already stopped");
+      if (started_)
+        return fail(ec::device_unavailable, "already started");
+      started_ = true;
+      handler_ = std::move(handler);
+      loop_ = &loop;
+    }
+    // Not under life_mtx_: run_sync waits for the loop thread, whose
+    // handlers may call stop().
+    if (auto err = station_.start_receiving(loop,
+                                            wire::header_size + CANFD_MTU)) {
+      std::lock_guard<std::mutex> guard{life_mtx_};
       handler_.reset();
-      return fail(ec::device_unavailable, *why);
+      started_ = false;
+      return err;
     }
     return caf::none;
   }
 
   void stop() override {
+    gate_.close();
+    // Ends delivery first (waits for a callback in progress on another
+    // thread), outside life_mtx_ for the same reason as in start.
+    station_.stop_receiving();
     std::lock_guard<std::mutex> guard{life_mtx_};
-    if (left_)
+    if (stopped_)
       return;
-    if (!stopped_) {
-      stopped_ = true;
-      gate_.close();
-      station_.request_stop();
-      if (tx_thread_.joinable())
-        tx_thread_.join();
-      if (station_.state() != nullptr) {
-        auto& me = bus().slots[cfg_.node];
-        me.pending.store(0);
-        me.heartbeat.store(0);
-      }
+    stopped_ = true;
+    if (tx_thread_.joinable())
+      tx_thread_.join();
+    if (station_.state() != nullptr) {
+      auto& me = bus().slots[cfg_.node];
+      me.pending.store(0);
+      me.heartbeat.store(0);
     }
-    // From a handler callback the receive loop ends once the callback
-    // returns; the next stop() or the destructor joins it and leaves.
-    if (!station_.join_receiver(rx_thread_))
-      return;
     station_.leave();
+    // From a handler the handler is still running: the loop drops it
+    // after the callback returns.
+    if (loop_ != nullptr && loop_->in_loop_thread() && handler_)
+      loop_->post([h = std::move(handler_)] {});
     handler_.reset();
-    left_ = true;
   }
 
 
@@ -472,7 +483,7 @@ private:
     });
   }
 
-  // -- medium_client: receive thread ---------------------------------------------
+  // -- medium_client: loop thread ------------------------------------------------
 
   bool accept(const uint8_t* data, size_t size, int64_t now,
               int64_t& deliver_at) override {
@@ -518,13 +529,14 @@ private:
   std::atomic<double> loss_;
   std::atomic<double> error_rate_;
 
-  // Lifecycle.
+  // Lifecycle, guarded by life_mtx_. handler_ is read by the loop
+  // callbacks between start and stop.
   std::mutex life_mtx_;
-  bool stopped_ = false; // no sending, no (re)start
-  bool left_ = false;    // both threads joined, sockets closed
+  bool started_ = false;
+  bool stopped_ = false; // transmit thread joined, bus left
+  event_loop* loop_ = nullptr;
   std::shared_ptr<frame_handler> handler_;
   std::thread tx_thread_;
-  std::thread rx_thread_;
 
   // Transmit queue (a heap, see `later`) and our slot, guarded by
   // gate_.mutex().

@@ -9,11 +9,22 @@
 // point-to-point link gives each of its two stations its own slot (full
 // duplex).
 //
-// Threads per driver: a transmit thread (paces frames, applies loss,
-// duplication, corruption and jitter, sends datagrams) and, after start(), a
-// receive thread (the medium's receive loop: validates datagrams, holds them
-// until their delivery time, watches that the socket file still exists,
-// calls the frame_handler).
+// Threads: receiving runs on the event loop given to start() (the
+// station's readiness callback and loop timers, emu_medium.hpp): it
+// validates datagrams, holds them until their delivery time, checks that
+// the socket file still exists and calls the frame_handler, on the loop
+// thread only, on_failure at most once. Each driver keeps one transmit
+// thread, the emulated wire itself: it paces frames at the medium's
+// bandwidth (sleeping out frame times, which no loop callback may do),
+// applies loss, duplication, corruption and jitter and sends the datagrams;
+// a fatal send error reaches the loop with event_loop::post. send() is
+// non-blocking (a queue behind a mutex), from any thread.
+//
+// Life cycle: open (joins the medium, starts the transmit thread), start
+// (registers the socket and timers with the loop through run_sync; once),
+// stop (any thread, idempotent, also from a handler: unwatches and cancels
+// on the loop, joins the transmit thread, leaves the medium; no handler
+// call after it returns).
 
 #include <algorithm>
 #include <atomic>
@@ -86,7 +97,6 @@ const emu_medium::medium_spec medium_spec{
   /*self_is_peer=*/false,
   /*rcvbuf=*/0,
   /*sndbuf=*/4 << 20,
-  /*rx_thread_name=*/nullptr,
   {"medium", "an emu medium file", "emulated link socket", "emulated link",
    "emulated link file", " removed", " removed (replaced)"},
 };
@@ -209,38 +219,49 @@ public:
   // -- link_driver ---------------------------------------------------------------
 
   caf::error start(std::shared_ptr<frame_handler> handler,
-                   event_loop&) override {
-    std::lock_guard<std::mutex> guard{lifecycle_mtx_};
-    if (handler == nullptr)
-      return make_error(ec::invalid_parameter, prefix_ + "start without handler");
-    if (stopped_)
-      return make_error(ec::device_failed, prefix_ + "start after stop");
-    if (rx_thread_.joinable())
-      return make_error(ec::already_exists, prefix_ + "already started");
-    handler_ = std::move(handler);
-    rx_thread_ = std::thread{[this] {
-      station_.receive_loop(emu::wire_header_size + cfg_.profile.mtu);
-    }};
+                   event_loop& loop) override {
+    {
+      std::lock_guard<std::mutex> guard{lifecycle_mtx_};
+      if (handler == nullptr)
+        return make_error(ec::invalid_parameter,
+                          prefix_ + "start without handler");
+      if (stopped_ || station_.stopping())
+        return make_error(ec::device_failed, prefix_ + "start after stop");
+      if (started_)
+        return make_error(ec::already_exists, prefix_ + "already started");
+      started_ = true;
+      handler_ = std::move(handler);
+      loop_ = &loop;
+    }
+    // Not under lifecycle_mtx_: run_sync waits for the loop thread, whose
+    // handlers may call stop().
+    if (auto err = station_.start_receiving(
+          loop, emu::wire_header_size + cfg_.profile.mtu)) {
+      std::lock_guard<std::mutex> guard{lifecycle_mtx_};
+      handler_.reset();
+      started_ = false;
+      return err;
+    }
     return caf::none;
   }
 
   void stop() override {
+    gate_.close();
+    // Ends delivery first (waits for a callback in progress on another
+    // thread), outside lifecycle_mtx_ for the same reason as in start.
+    station_.stop_receiving();
     std::lock_guard<std::mutex> guard{lifecycle_mtx_};
-    if (left_)
+    if (stopped_)
       return;
-    if (!stopped_) {
-      stopped_ = true;
-      gate_.close();
-      station_.request_stop();
-      if (tx_thread_.joinable())
-        tx_thread_.join();
-    }
-    // From a handler callback the receive loop ends once the callback
-    // returns; the next stop() or the destructor joins it and leaves.
-    if (!station_.join_receiver(rx_thread_))
-      return;
+    stopped_ = true;
+    if (tx_thread_.joinable())
+      tx_thread_.join();
     station_.leave();
-    left_ = true;
+    // From a handler the handler is still running: the loop drops it
+    // after the callback returns.
+    if (loop_ != nullptr && loop_->in_loop_thread() && handler_)
+      loop_->post([h = std::move(handler_)] {});
+    handler_.reset();
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -508,7 +529,7 @@ private:
     return send_result::ok;
   }
 
-  // -- medium_client: receive thread ---------------------------------------------
+  // -- medium_client: loop thread ------------------------------------------------
 
   bool accept(const uint8_t* data, size_t size, int64_t now,
               int64_t& deliver_at) override {
@@ -562,13 +583,14 @@ private:
   std::atomic<int64_t> jitter_ns_;
   std::atomic<uint64_t> bandwidth_;
 
-  // Lifecycle.
+  // Lifecycle, guarded by lifecycle_mtx_. handler_ is read by the loop
+  // callbacks between start and stop.
   std::mutex lifecycle_mtx_;
-  bool stopped_ = false; // no sending, no (re)start
-  bool left_ = false;    // both threads joined, sockets closed
+  bool started_ = false;
+  bool stopped_ = false; // transmit thread joined, medium left
+  event_loop* loop_ = nullptr;
   std::shared_ptr<frame_handler> handler_;
   std::thread tx_thread_;
-  std::thread rx_thread_;
 
   // Transmit queue, guarded by gate_.mutex().
   emu_medium::tx_gate gate_;

@@ -5,15 +5,11 @@
 #include <cstring>
 
 #include <fcntl.h>
-#include <poll.h>
-#include <pthread.h>
-#include <sys/eventfd.h>
+#include <sys/epoll.h>
 #include <sys/file.h>
 #include <sys/mman.h>
-#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "channels/drivers/medium_dir.hpp"
@@ -127,6 +123,7 @@ station::station(std::string dir, std::string prefix, const medium_spec& spec,
 }
 
 station::~station() {
+  stop_->store(true); // for anything still posted to the loop
   if (state_ != nullptr)
     ::munmap(state_, spec_.state_size);
 }
@@ -278,10 +275,6 @@ caf::error station::claim() {
   if (spec_.sndbuf > 0)
     ::setsockopt(tx_fd_.get(), SOL_SOCKET, SO_SNDBUF, &spec_.sndbuf,
                  sizeof(spec_.sndbuf));
-  wake_fd_.reset(::eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK));
-  if (!wake_fd_)
-    return fail(ec::device_unavailable,
-                "cannot create eventfd: " + errno_text(errno));
   for (auto n = min_station; n <= max_station; ++n)
     peer_addrs_[n] = unix_addr(dir_ + "/" + station_file(n));
   return caf::none;
@@ -350,120 +343,208 @@ void station::refresh_peers() {
 }
 
 void station::report_tx_failure(caf::error err) {
+  event_loop* loop = nullptr;
   {
     std::lock_guard<std::mutex> guard{failure_mtx_};
     if (!tx_failure_)
       tx_failure_ = std::move(err);
+    loop = post_to_;
   }
   failed_.store(true);
-  wake_receiver();
+  // The loop outlives stop(), which joins this thread; the task checks the
+  // stop flag before it touches the station.
+  if (loop != nullptr)
+    loop->post([this, stop = stop_] {
+      if (!stop->load())
+        on_tx_failure();
+    });
 }
 
-void station::wake_receiver() {
-  if (wake_fd_) {
-    uint64_t one = 1;
-    [[maybe_unused]] auto n = ::write(wake_fd_.get(), &one, sizeof(one));
+// -- station: receiving on the event loop ----------------------------------------
+
+caf::error station::start_receiving(event_loop& loop, size_t max_datagram) {
+  loop_.store(&loop); // before attach: a concurrent stop_receiving finds it
+  caf::error err;
+  loop.run_sync([&] { err = attach(loop, max_datagram); });
+  return err;
+}
+
+void station::stop_receiving() {
+  request_stop();
+  if (auto* loop = loop_.load())
+    loop->run_sync([this] { detach(); });
+}
+
+void station::request_stop() {
+  stop_->store(true);
+}
+
+/// Loop thread: watches the socket and arms the liveness timer.
+caf::error station::attach(event_loop& loop, size_t max_datagram) {
+  if (stopping())
+    return fail(ec::device_failed, "the device is stopped");
+  rx_buf_.resize(max_datagram);
+  auto stop = stop_;
+  if (auto err = loop.watch(rx_fd_.get(), EPOLLIN, [this, stop](uint32_t) {
+        // `stop` lives in this callback's copy until it returns, so
+        // on_readable can check it after the station was destroyed.
+        if (!stop->load())
+          on_readable(*stop);
+      }))
+    return fail(ec::device_unavailable,
+                std::string{"cannot receive on "} + spec_.texts.socket_noun
+                  + " " + sock_path_ + ": " + render(err));
+  receiving_ = true;
+  arm_liveness_timer();
+  bool pending = false;
+  {
+    std::lock_guard<std::mutex> guard{failure_mtx_};
+    post_to_ = &loop;
+    pending = static_cast<bool>(tx_failure_);
   }
+  if (pending) // the transmit thread failed before start
+    loop.post([this, stop] {
+      if (!stop->load())
+        on_tx_failure();
+    });
+  return caf::none;
 }
 
-// -- station: receive side -------------------------------------------------------
-
-void station::receive_loop(size_t max_datagram) {
-  ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0); // precise wake-ups
-  if (spec_.rx_thread_name != nullptr)
-    pthread_setname_np(pthread_self(), spec_.rx_thread_name);
-  std::vector<uint8_t> buf(max_datagram);
-  auto next_check = now_ns() + liveness_period_ns;
-  for (;;) {
-    if (stopping())
-      return;
-    auto now = now_ns();
-    while (held_.due(now) && !stopping())
-      deliver_front();
-    if (stopping())
-      return;
-    if (now >= next_check) {
-      if (auto err = check_files()) {
-        report_failure(std::move(err));
-        return;
-      }
-      next_check = now + liveness_period_ns;
-    }
-    if (auto err = take_tx_failure()) {
-      report_failure(std::move(err));
-      return;
-    }
-    auto wake_at = next_check;
-    if (!held_.empty())
-      wake_at = std::min(wake_at, held_.next_due());
-    auto wait = std::max<int64_t>(0, wake_at - now);
-    timespec ts{static_cast<time_t>(wait / 1'000'000'000),
-                static_cast<long>(wait % 1'000'000'000)};
-    pollfd fds[2] = {{rx_fd_.get(), POLLIN, 0}, {wake_fd_.get(), POLLIN, 0}};
-    auto rc = ::ppoll(fds, 2, &ts, nullptr);
-    if (rc < 0) {
-      if (errno == EINTR)
-        continue;
-      report_failure(fail(ec::device_failed,
-                          std::string{"cannot poll "} + spec_.texts.socket_noun
-                            + " " + sock_path_ + ": " + errno_text(errno)));
-      return;
-    }
-    if (fds[1].revents != 0) {
-      uint64_t count;
-      [[maybe_unused]] auto n = ::read(wake_fd_.get(), &count, sizeof(count));
-    }
-    if (fds[0].revents != 0 && !read_datagrams(buf))
-      return;
+/// Loop thread: unwatches the socket and cancels the timers. Idempotent.
+void station::detach() {
+  {
+    std::lock_guard<std::mutex> guard{failure_mtx_};
+    post_to_ = nullptr;
   }
+  if (!receiving_)
+    return;
+  receiving_ = false;
+  auto* loop = loop_.load();
+  loop->unwatch(rx_fd_.get());
+  loop->cancel_timer(hold_timer_);
+  hold_timer_ = {};
+  loop->cancel_timer(liveness_timer_);
+  liveness_timer_ = {};
 }
 
-/// Reads what is queued on the socket. False after a fatal error.
-bool station::read_datagrams(std::vector<uint8_t>& buf) {
+/// Readiness callback: like one turn of the receive thread it replaces, due
+/// datagrams first, then a bounded batch from the socket. Every client call
+/// may stop the station (stop from a handler): after one, `stop` is checked
+/// before anything of the station is touched again.
+void station::on_readable(const std::atomic<bool>& stop) {
+  if (!deliver_due(stop))
+    return;
   for (int i = 0; i < max_reads_per_wakeup; ++i) {
-    auto n = ::recv(rx_fd_.get(), buf.data(), buf.size(),
+    auto n = ::recv(rx_fd_.get(), rx_buf_.data(), rx_buf_.size(),
                     MSG_DONTWAIT | MSG_TRUNC);
     if (n < 0) {
       auto err = errno;
       if (err == EAGAIN || err == EWOULDBLOCK)
-        return true;
+        break;
       if (err == EINTR)
         continue;
       report_failure(fail(ec::device_failed,
                           std::string{"cannot receive on "}
                             + spec_.texts.socket_noun + " " + sock_path_
                             + ": " + errno_text(err)));
-      return false;
+      return;
     }
     auto size = static_cast<size_t>(n); // the real size (MSG_TRUNC)
     auto now = now_ns();
     int64_t deliver_at = 0;
-    if (!client_.accept(buf.data(), size, now, deliver_at)) {
-      if (stopping())
-        return true;
+    if (!client_.accept(rx_buf_.data(), size, now, deliver_at)) {
+      if (stop.load())
+        return;
       continue;
     }
     if (held_.empty() && deliver_at <= now) {
-      client_.deliver(buf.data(), size);
-      if (stopping())
-        return true;
+      client_.deliver(rx_buf_.data(), size);
+      if (stop.load())
+        return;
       continue;
     }
-    if (held_.full()) {
-      // Overloaded: hand the earliest up early rather than lose it.
-      deliver_front();
-      if (stopping())
-        return true;
-    }
-    held_.push(deliver_at, buf.data(), size);
+    if (held_.full() && !deliver_front(stop)) // overloaded: early, not lost
+      return;
+    held_.push(deliver_at, rx_buf_.data(), size);
   }
+  arm_hold_timer();
+}
+
+/// Delivers up to max_reads_per_wakeup datagrams that are due. False when
+/// a client call stopped the station.
+bool station::deliver_due(const std::atomic<bool>& stop) {
+  auto now = now_ns();
+  for (int i = 0; i < max_reads_per_wakeup && held_.due(now); ++i)
+    if (!deliver_front(stop))
+      return false;
   return true;
 }
 
-void station::deliver_front() {
+bool station::deliver_front(const std::atomic<bool>& stop) {
   auto bytes = held_.pop();
   client_.deliver(bytes.data(), bytes.size());
+  if (stop.load())
+    return false;
   held_.recycle(std::move(bytes));
+  return true;
+}
+
+void station::on_hold_timer(const std::atomic<bool>& stop) {
+  hold_timer_ = {};
+  if (receiving_ && deliver_due(stop))
+    arm_hold_timer();
+}
+
+/// Keeps one loop timer at the earliest held datagram's delivery time (or,
+/// when more are due than one callback delivers, at the next turn).
+void station::arm_hold_timer() {
+  auto* loop = loop_.load();
+  if (held_.empty()) {
+    loop->cancel_timer(hold_timer_);
+    hold_timer_ = {};
+    return;
+  }
+  auto due = std::max(held_.next_due(), now_ns() + 1);
+  if (hold_timer_ && hold_timer_at_ == due)
+    return;
+  loop->cancel_timer(hold_timer_);
+  hold_timer_at_ = due;
+  hold_timer_ = loop->add_timer(due, [this, stop = stop_] {
+    if (!stop->load())
+      on_hold_timer(*stop);
+  });
+}
+
+void station::arm_liveness_timer() {
+  liveness_timer_ = loop_.load()->add_timer(now_ns() + liveness_period_ns,
+                                            [this, stop = stop_] {
+                                              if (!stop->load())
+                                                on_liveness_timer();
+                                            });
+}
+
+void station::on_liveness_timer() {
+  liveness_timer_ = {};
+  if (!receiving_)
+    return;
+  if (auto err = check_files()) {
+    report_failure(std::move(err));
+    return;
+  }
+  arm_liveness_timer();
+}
+
+/// Loop thread: a failure the transmit thread posted.
+void station::on_tx_failure() {
+  if (!receiving_)
+    return; // receiving ended (a failure was reported already)
+  caf::error err;
+  {
+    std::lock_guard<std::mutex> guard{failure_mtx_};
+    err = std::exchange(tx_failure_, caf::error{});
+  }
+  if (err)
+    report_failure(std::move(err));
 }
 
 /// Non-null when our socket file or the state file is gone or replaced.
@@ -488,32 +569,15 @@ caf::error station::check_files() const {
   return check(state_path_, state_dev_, state_ino_);
 }
 
-caf::error station::take_tx_failure() {
-  std::lock_guard<std::mutex> guard{failure_mtx_};
-  return std::exchange(tx_failure_, caf::error{});
-}
-
+/// Loop thread: ends receiving and reports `err` (once: receiving ends).
 void station::report_failure(caf::error err) {
   failed_.store(true);
+  detach();
   if (!stopping())
     client_.fail(std::move(err));
 }
 
-// -- station: any thread, life cycle ---------------------------------------------
-
-void station::request_stop() {
-  stopping_.store(true);
-  wake_receiver();
-}
-
-bool station::join_receiver(std::thread& rx) {
-  if (!rx.joinable())
-    return true;
-  if (rx.get_id() == std::this_thread::get_id())
-    return false;
-  rx.join();
-  return true;
-}
+// -- station: life cycle ----------------------------------------------------------
 
 void station::leave() {
   // Remove our socket file, unless somebody else's replaced it.

@@ -15,22 +15,31 @@
 //    no clock, no I/O; time and random draws go in as arguments, so they are
 //    tested table-driven (tests/channels/emu_medium_test.cpp);
 //  * `station`: one station's I/O on the medium (directory, state file,
-//    station claim, sockets, fan-out to peers, the receive loop with its
-//    hold queue, liveness of its files). What differs between kinds of
-//    medium (state file layout, who may join, datagram codec, delivery) is
-//    asked of a `medium_client` the driver implements.
+//    station claim, sockets, fan-out to peers, receiving on the module's
+//    event loop with its hold queue, liveness of its files). What differs
+//    between kinds of medium (state file layout, who may join, datagram
+//    codec, delivery) is asked of a `medium_client` the driver implements.
 //
-// Threads are the drivers' own: a station is used by one transmit thread
-// (send_to, for_each_peer, report_tx_failure) and one receive thread
-// (receive_loop); request_stop, failed and counters may be called from any
-// thread; open and leave by the driver's life cycle only, with no transmit
-// or receive thread running in it (leave: see its comment).
+// Threads: receiving runs on the module's event loop (channels/
+// event_loop.hpp): the station watches its receive socket there and keeps
+// two loop timers, one for the earliest held datagram (latency, jitter,
+// end of transmission) and one for the liveness check of its files; it
+// owns no receive thread. Transmitting still runs on one transmit thread
+// per driver (send_to, for_each_peer, report_tx_failure), because that
+// thread IS the emulated wire: it sleeps out frame times at the medium's
+// bandwidth and, on the CAN bus, arbitration back-offs, which a loop
+// callback must not do. A fatal transmit error reaches the loop with
+// event_loop::post. start_receiving, stop_receiving, request_stop, failed
+// and counters may be called from any thread; open and leave by the
+// driver's life cycle only (leave: after the transmit thread ended and
+// stop_receiving returned).
 
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <random>
 #include <string>
@@ -39,6 +48,8 @@
 #include <vector>
 
 #include <caf/expected.hpp>
+
+#include "channels/event_loop.hpp"
 
 #include <sys/types.h>
 #include <sys/un.h>
@@ -55,7 +66,7 @@ namespace herm::emu_medium {
 constexpr uint64_t min_station = 1;
 constexpr uint64_t max_station = 254;
 
-/// How often the receive loop checks that its files still exist.
+/// How often a receiving station checks that its files still exist.
 constexpr int64_t liveness_period_ns = 100'000'000;
 /// Peers are rescanned at least this often (and whenever a station joins
 /// or leaves through a driver: the state file's generation counter).
@@ -68,7 +79,9 @@ constexpr int64_t max_credit_ns = 50'000'000;
 /// Datagrams a receiver holds for later delivery; above this, the earliest
 /// is handed up early rather than dropped.
 constexpr size_t max_held_frames = 4096;
-/// Datagrams read per wake-up before due frames are delivered again.
+/// Datagrams read, and held datagrams delivered, per loop callback: one
+/// busy medium cannot starve the other descriptors on the loop (epoll is
+/// level-triggered, so what is left is handled in the next turn).
 constexpr int max_reads_per_wakeup = 64;
 
 // -- pure parts: impairments ---------------------------------------------------
@@ -191,7 +204,7 @@ copy_reusing(std::vector<std::vector<uint8_t>>& spare, const uint8_t* data,
 
 /// Received datagrams held until their delivery time, earliest first, in
 /// arrival order among equal times. Capacity is the caller's to enforce
-/// (full(): deliver the earliest early). Receive thread only.
+/// (full(): deliver the earliest early). Loop thread only.
 /// Memory: the datagrams held plus at most `spare_buffers` recycled ones.
 class hold_queue {
 public:
@@ -324,7 +337,7 @@ struct medium_texts {
   const char* noun;
   /// "an emu medium file": "'F' is not an emu medium file".
   const char* file_kind;
-  /// "emulated link socket": "cannot poll emulated link socket P".
+  /// "emulated link socket": "cannot receive on emulated link socket P".
   const char* socket_noun;
   /// "emulated link": "cannot send on emulated link D".
   const char* link_noun;
@@ -352,8 +365,6 @@ struct medium_spec {
   /// 0: the system's default. Best effort (capped by net.core.*mem_max).
   int rcvbuf;
   int sndbuf;
-  /// Name of the receive thread (pthread_setname_np), or nullptr.
-  const char* rx_thread_name;
   medium_texts texts;
 };
 
@@ -373,18 +384,19 @@ public:
   /// open(): "station N is already taken on medium 'D'" for a live station.
   virtual std::string taken(uint64_t station) const = 0;
 
-  /// Receive thread: checks a datagram of `size` bytes (the real size; the
+  /// Loop thread: checks a datagram of `size` bytes (the real size; the
   /// buffer holds min(size, its capacity)). True with `deliver_at` (ns) set,
   /// or false after the client reported it as malformed.
   virtual bool accept(const uint8_t* data, size_t size, int64_t now,
                       int64_t& deliver_at)
     = 0;
 
-  /// Receive thread: a datagram accepted earlier is due.
+  /// Loop thread: a datagram accepted earlier is due.
   virtual void deliver(const uint8_t* data, size_t size) = 0;
 
-  /// Receive thread: a fatal error; the loop ends right after. Never
-  /// called after request_stop.
+  /// Loop thread: a fatal error (receive side, liveness or a transmit
+  /// error posted by the transmit thread); receiving ends right before.
+  /// Called at most once, never after request_stop.
   virtual void fail(caf::error err) = 0;
 };
 
@@ -402,7 +414,8 @@ public:
   station(std::string dir, std::string prefix, const medium_spec& spec,
           medium_client& client);
 
-  /// Unmaps the state file. No thread may use the station any more.
+  /// Unmaps the state file. No thread may use the station any more, and
+  /// stop_receiving must have returned (the driver's stop does both).
   ~station();
 
   station(const station&) = delete;
@@ -456,26 +469,40 @@ public:
     return true;
   }
 
-  /// Hands a fatal transmit error to the receive loop (the first one wins)
-  /// and marks the station failed.
+  /// Marks the station failed and hands a fatal transmit error to the
+  /// loop (event_loop::post), which reports it through client.fail unless
+  /// receiving ended first; the first error wins. Before start_receiving
+  /// the error waits for it.
   void report_tx_failure(caf::error err);
 
-  // -- receive thread -----------------------------------------------------------
+  // -- receiving on the event loop (any thread) -------------------------------
 
-  /// Receives until request_stop or a fatal error (reported once through
-  /// client.fail): reads datagrams of up to `max_datagram` bytes, has the
-  /// client accept them, holds them until they are due (max_held_frames),
-  /// delivers them through the client, checks every liveness_period_ns that
-  /// the socket and state files are still ours.
-  void receive_loop(size_t max_datagram);
+  /// Starts receiving on `loop`, which must outlive stop_receiving: watches
+  /// the receive socket (readiness callback: reads up to
+  /// max_reads_per_wakeup datagrams of up to `max_datagram` bytes, has the
+  /// client accept them, delivers the due ones and holds the others), arms
+  /// a loop timer for the earliest held datagram (max_held_frames) and one
+  /// that checks every liveness_period_ns that the socket and state files
+  /// are still ours. Registers through loop.run_sync; starts no thread.
+  /// Once per station. Errors: ec::device_failed after request_stop,
+  /// ec::device_unavailable when the loop refuses the socket.
+  caf::error start_receiving(event_loop& loop, size_t max_datagram);
 
-  // -- any thread ---------------------------------------------------------------
+  /// request_stop, then unwatches the socket and cancels both timers on the
+  /// loop (run_sync; waits for a callback in progress on another thread).
+  /// Idempotent. After it returns the client is called no more. Called
+  /// from a client call (the loop thread), the callback that made that call
+  /// notices request_stop as soon as the call returns and touches neither
+  /// the station nor its descriptors again, so the driver may leave (even
+  /// destroy the station) at once.
+  void stop_receiving();
 
-  /// The receive loop calls the client no more and ends soon.
+  /// The loop calls the client no more once the callback in progress
+  /// returns; report_tx_failure posts nothing that would.
   void request_stop();
 
   bool stopping() const {
-    return stopping_.load();
+    return stop_->load();
   }
 
   /// After a fatal error (transmit or receive side).
@@ -490,17 +517,9 @@ public:
 
   // -- life cycle ---------------------------------------------------------------
 
-  /// Waits for the thread `rx` running receive_loop to end, after
-  /// request_stop, and returns true; true at once when `rx` never started.
-  /// Called on `rx` itself (stop from a handler callback, which would join
-  /// the thread with itself) it returns false and does nothing: the loop
-  /// ends once the callback returns, and the driver must call again from
-  /// another thread (a second stop() or its destructor) before leave().
-  static bool join_receiver(std::thread& rx);
-
-  /// Leaves the medium once the transmit and receive threads have ended:
-  /// removes our socket file (unless somebody else's replaced it), tells
-  /// transmitters, closes both sockets.
+  /// Leaves the medium once the transmit thread has ended and
+  /// stop_receiving returned: removes our socket file (unless somebody
+  /// else's replaced it), tells transmitters, closes both sockets.
   void leave();
 
 private:
@@ -510,11 +529,17 @@ private:
   void refresh_peers();
   std::atomic<uint32_t>& generation() const;
   caf::error check_files() const;
-  caf::error take_tx_failure();
-  bool read_datagrams(std::vector<uint8_t>& buf);
-  void deliver_front();
+  caf::error attach(event_loop& loop, size_t max_datagram);
+  void detach();
+  void on_readable(const std::atomic<bool>& stop);
+  bool deliver_due(const std::atomic<bool>& stop);
+  bool deliver_front(const std::atomic<bool>& stop);
+  void on_hold_timer(const std::atomic<bool>& stop);
+  void arm_hold_timer();
+  void on_liveness_timer();
+  void arm_liveness_timer();
+  void on_tx_failure();
   void report_failure(caf::error err);
-  void wake_receiver();
 
   const std::string dir_;
   const std::string prefix_; // "device 'NAME': "
@@ -531,10 +556,15 @@ private:
   ino_t sock_ino_ = 0;
   posix::unique_fd rx_fd_;
   posix::unique_fd tx_fd_;
-  posix::unique_fd wake_fd_;
 
-  std::atomic<bool> stopping_{false};
+  /// request_stop's flag, shared with every callback and posted task, which
+  /// check it before touching the station: a station destroyed on the loop
+  /// thread (stop from a handler) leaves them harmless.
+  std::shared_ptr<std::atomic<bool>> stop_
+    = std::make_shared<std::atomic<bool>>(false);
   std::atomic<bool> failed_{false};
+  /// The loop given to start_receiving (null before).
+  std::atomic<event_loop*> loop_{nullptr};
   std::atomic<uint64_t> overruns_{0};
 
   // Transmit thread only.
@@ -545,12 +575,19 @@ private:
   uint32_t peers_generation_ = 0;
   int64_t peers_scanned_at_ = 0;
 
-  // Failure handed from the transmit thread to the receive thread.
+  // Failure handed from the transmit thread to the loop; post_to_ is the
+  // loop while receiving (set and cleared on the loop thread).
   std::mutex failure_mtx_;
   caf::error tx_failure_;
+  event_loop* post_to_ = nullptr;
 
-  // Receive thread only.
+  // Loop thread only.
+  bool receiving_ = false; // socket watched, timers armed when due
+  std::vector<uint8_t> rx_buf_;
   hold_queue held_{max_held_frames};
+  event_loop::timer_handle hold_timer_;
+  int64_t hold_timer_at_ = 0;
+  event_loop::timer_handle liveness_timer_;
 };
 
 } // namespace herm::emu_medium

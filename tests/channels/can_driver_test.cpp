@@ -49,6 +49,7 @@
 #include <linux/rtnetlink.h>
 
 #include "channels/error.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/drivers/can_emu_wire.hpp"
 #include "channels/drivers/can_id.hpp"
 #include "channels/link_driver.hpp"
@@ -1116,12 +1117,15 @@ TEST_F(can_emu_test, a_dead_station_does_not_block_the_bus_for_ever) {
   };
   auto handler = std::make_shared<echo>();
   int status = 1;
-  {
+  // A loop of its own: the process's shared io thread, if the parent had
+  // started it before the fork, does not run in the child.
+  auto io = io_thread::make();
+  if (io) {
     device_config cfg{"child0", "can", bus, {{"node", "2"}, {"queue", "256"}}};
     auto d = find_link_kind("can")->open(cfg);
     if (d) {
       handler->driver = d->get();
-      if (!(*d)->start(handler)) {
+      if (!(*d)->start(handler, (*io)->loop())) {
         char ok = 'R';
         if (::write(ready_fd, &ok, 1) == 1) {
           std::unique_lock<std::mutex> lk{handler->mtx};

@@ -28,6 +28,7 @@
 #include <unistd.h>
 
 #include "channels/error.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/drivers/emu_wire.hpp"
 #include "channels/link_driver.hpp"
 #include "tests/channels/recorder.hpp"
@@ -665,12 +666,15 @@ TEST_F(emu_driver_test, addresses_are_station_numbers) {
   };
   auto handler = std::make_shared<echo>();
   int status = 1;
-  {
+  // A loop of its own: the process's shared io thread, if the parent had
+  // started it before the fork, does not run in the child.
+  auto io = io_thread::make();
+  if (io) {
     device_config cfg{"child0", "emu", medium, {{"station", "2"}}};
     auto d = find_link_kind("emu")->open(cfg);
     if (d) {
       handler->driver = d->get();
-      if (!(*d)->start(handler)) {
+      if (!(*d)->start(handler, (*io)->loop())) {
         char ok = 'R';
         if (::write(ready_fd, &ok, 1) == 1) {
           std::unique_lock<std::mutex> lk{handler->mtx};
