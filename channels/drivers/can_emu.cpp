@@ -25,7 +25,9 @@
 // error reaches the loop with event_loop::post. send() never blocks beyond
 // a mutex. stop() (any thread, idempotent, also from a handler) unwatches
 // and cancels on the loop, joins the transmit thread and leaves the bus; no
-// handler call follows its return.
+// handler call follows its return. From a handler that join runs on the
+// loop thread: the transmit thread ends within one send, at most
+// emu_medium::overrun_wait_ns when a receiver's queue is full.
 
 #include "channels/drivers/can_emu.hpp"
 

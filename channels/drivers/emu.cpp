@@ -24,7 +24,9 @@
 // (registers the socket and timers with the loop through run_sync; once),
 // stop (any thread, idempotent, also from a handler: unwatches and cancels
 // on the loop, joins the transmit thread, leaves the medium; no handler
-// call after it returns).
+// call after it returns). From a handler that join runs on the loop
+// thread: the transmit thread ends within one send, at most
+// emu_medium::overrun_wait_ns when a receiver's queue is full.
 
 #include <algorithm>
 #include <atomic>
