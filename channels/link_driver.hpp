@@ -31,9 +31,12 @@ constexpr uint8_t max_lanes = 16;
 
 /// Receives what a driver hears.
 ///
-/// Threading: a driver calls these from its own receive thread (descriptor
-/// based kinds) or from the thread of the actor that sent the frame (the
-/// in-process kind). Implementations must be thread-safe and must not block.
+/// Threading: a driver calls these on the thread of the event loop it was
+/// started on (descriptor-based kinds: from its readiness callbacks and
+/// timers; docs/architecture.md, "Threads"), or on the thread of the actor
+/// that sent the frame (the in-process kind). Implementations must be
+/// thread-safe and must not block: under the loop scheduler that thread
+/// runs every actor of the module.
 class frame_handler {
 public:
   virtual ~frame_handler();

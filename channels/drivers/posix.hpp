@@ -88,24 +88,6 @@ start_thread(std::thread& thread, const char* what, F&& body) {
   return std::nullopt;
 }
 
-/// Ends a driver's IO thread that polls the eventfd `wake_fd` and checks a
-/// stop flag the caller has already set: when `thread` is joinable and is
-/// not the calling thread, wakes it (signal_eventfd) and joins it, blocking
-/// until the loop notices. Returns false, doing nothing, when called on
-/// `thread` itself (stop() from a frame handler): that loop ends once the
-/// callback returns and still uses its descriptors, so the caller must leave
-/// them open and join `thread` later (a second stop or the destructor). True
-/// otherwise, including when `thread` never started.
-inline bool wake_and_join(std::thread& thread, int wake_fd) {
-  if (!thread.joinable())
-    return true;
-  if (thread.get_id() == std::this_thread::get_id())
-    return false;
-  signal_eventfd(wake_fd);
-  thread.join();
-  return true;
-}
-
 /// The kernel's receive-buffer drop count of a socket with SO_RXQ_OVFL
 /// enabled. The kernel attaches its cumulative count (modulo 2^32) to a
 /// datagram or frame received once drops have happened; `drops_since`
