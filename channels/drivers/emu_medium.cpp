@@ -371,8 +371,12 @@ caf::error station::start_receiving(event_loop& loop, size_t max_datagram) {
 
 void station::stop_receiving() {
   request_stop();
-  if (auto* loop = loop_.load())
+  if (auto* loop = loop_.load()) {
     loop->run_sync([this] { detach(); });
+    // Done with the loop: a later stop (the destructor's) must not touch
+    // it, it may be gone by then.
+    loop_.store(nullptr);
+  }
 }
 
 void station::request_stop() {

@@ -146,18 +146,19 @@ TEST_F(loop_system, a_blocked_detached_actor_does_not_stall_the_loop) {
   caf::actor_system sys{cfg};
   std::promise<void> release;
   auto released = release.get_future().share();
-  std::atomic<bool> blocked{false};
-  std::atomic<bool> done{false};
+  // Shared with the detached actor, which may outlive this scope's locals.
+  auto blocked = std::make_shared<std::atomic<bool>>(false);
+  auto done = std::make_shared<std::atomic<bool>>(false);
   // Blocking work belongs in a detached actor: a thread of its own.
-  auto slow = sys.spawn<caf::detached>([&](caf::event_based_actor*) -> caf::behavior {
-    return {[&](int) {
-      blocked = true;
+  auto slow = sys.spawn<caf::detached>([=](caf::event_based_actor*) -> caf::behavior {
+    return {[=](int) {
+      *blocked = true;
       released.wait();
-      done = true;
+      *done = true;
     }};
   });
   caf::anon_send(slow, 1);
-  while (!blocked)
+  while (!*blocked)
     std::this_thread::sleep_for(1ms);
   auto threads = std::make_shared<std::set<std::thread::id>>();
   auto mtx = std::make_shared<std::mutex>();
@@ -167,8 +168,10 @@ TEST_F(loop_system, a_blocked_detached_actor_does_not_stall_the_loop) {
   self->request(quick, 30s, 41).receive([&](int y) { answered = y == 42; },
                                          [&](caf::error&) {});
   EXPECT_TRUE(answered);
-  EXPECT_FALSE(done); // the slow one is still blocked
+  EXPECT_FALSE(*done); // the slow one is still blocked
   release.set_value();
+  while (!*done)
+    std::this_thread::sleep_for(1ms);
 }
 
 TEST_F(loop_system, descriptor_callbacks_run_on_the_actors_thread_and_reach_actors_without_a_wake) {
