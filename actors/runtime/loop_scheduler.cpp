@@ -21,6 +21,7 @@
 #include "caf/settings.hpp"
 #include "caf/scheduler/abstract_coordinator.hpp"
 
+#include "channels/drivers/posix.hpp"
 #include "channels/error.hpp"
 #include "channels/event_loop.hpp"
 
@@ -251,21 +252,15 @@ private:
       spinning.fetch_sub(1);
       return false;
     }
-    auto until = posix_now() + std::min(busy_poll_ns_, clock_.wait_ns());
+    auto until = posix::now_ns() + std::min(busy_poll_ns_, clock_.wait_ns());
     bool found = false;
-    while (!found && posix_now() < until && !loop_->stop_requested()) {
+    while (!found && posix::now_ns() < until && !loop_->stop_requested()) {
       found = loop_->run_once(0) > 0 || foreign_count_.load() > 0
               || !ready_.empty();
       busy_polls_.fetch_add(1, std::memory_order_relaxed);
     }
     spinning.fetch_sub(1);
     return found;
-  }
-
-  static int64_t posix_now() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
   }
 
   void drain_foreign() {

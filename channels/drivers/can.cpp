@@ -28,7 +28,7 @@
 // idempotent and may be called from any thread: on the loop thread
 // (run_sync) it unwatches and closes the socket and drops the handler; no
 // handler call follows its return. Called from a handler it ends delivery
-// at once: the callback sees stopping_ and touches the socket no more.
+// at once: the callback sees watch_.stopping() and touches the socket no more.
 
 #include <algorithm>
 #include <atomic>
@@ -54,6 +54,7 @@
 #include "channels/drivers/can_common.hpp"
 #include "channels/drivers/can_emu.hpp"
 #include "channels/drivers/can_id.hpp"
+#include "channels/drivers/loop_watch.hpp"
 #include "channels/drivers/posix.hpp"
 #include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
@@ -188,52 +189,20 @@ public:
   /// Watches the socket on `loop`; see the file comment for the contract.
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    caf::error result;
-    loop.run_sync([&] {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ != state::opened) {
-        result = fail(ec::device_unavailable, state_ == state::running
-                                                ? "already started"
-                                                : "already stopped");
-        return;
-      }
-      if (!handler) {
-        result = fail(ec::invalid_parameter, "start needs a frame handler");
-        return;
-      }
-      if (auto err = loop.watch(fd_.get(), EPOLLIN,
-                                [this](uint32_t events) { on_ready(events); })) {
-        result = fail(ec::device_unavailable,
-                      "cannot watch the socket: " + render(err));
-        return;
-      }
-      handler_ = std::move(handler);
-      loop_ = &loop;
-      state_ = state::running;
-      // A send() before start may have found the interface gone.
-      if (tx_down_errno_.load() != 0)
-        post_tx_failure();
-    });
-    return result;
+    return watch_.start(
+      loop, fd_.get(), handler != nullptr, "socket",
+      [this](ec code, const std::string& what) { return fail(code, what); },
+      nullptr, [this](uint32_t events) { on_ready(events); },
+      [&] {
+        handler_ = std::move(handler);
+        // A send() before start may have found the interface gone.
+        if (tx_down_errno_.load() != 0)
+          post_tx_failure();
+      });
   }
 
   void stop() override {
-    event_loop* loop;
-    {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ == state::stopped)
-        return;
-      if (state_ == state::opened) { // never started: nothing is watched
-        close_socket();
-        return;
-      }
-      loop = loop_;
-    }
-    loop->run_sync([this] {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ != state::running)
-        return; // another stop came first
-      loop_.load()->unwatch(fd_.get());
+    watch_.stop([this] {
       close_socket();
       handler_.reset();
     });
@@ -291,26 +260,22 @@ public:
   }
 
 private:
-  enum class state { opened, running, stopped };
-
   bool delivery_ended() const override {
-    return stopping_.load();
+    return watch_.stopping();
   }
 
-  /// Ends delivery and closes the socket. Requires life_mtx_; on the loop
-  /// thread once started.
+  /// Closes the socket (stop). On the loop thread once started.
   void close_socket() {
-    stopping_ = true;
     *alive_ = false;
-    state_ = state::stopped;
     std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
     fd_.reset();
   }
 
   /// Has the loop thread report tx_down_errno_. Requires fd_mtx_ (shared)
-  /// or life_mtx_; does nothing before start (start posts it then).
+  /// or the life-cycle lock; does nothing before start (start posts it
+  /// then).
   void post_tx_failure() {
-    auto* loop = loop_.load();
+    auto* loop = watch_.loop();
     if (loop == nullptr)
       return;
     loop->post([this, alive = alive_] {
@@ -321,10 +286,10 @@ private:
 
   /// Reports the failure once and stops watching the socket. Loop thread.
   void report_failure(int err) {
-    if (stopping_.load() || failed_)
+    if (watch_.stopping() || failed_)
       return;
     failed_ = true;
-    loop_.load()->unwatch(fd_.get());
+    watch_.unwatch();
     std::string what = err == ENETDOWN
                          ? "interface '" + cfg_.interface + "' went down"
                        : err == ENODEV || err == ENXIO
@@ -373,10 +338,10 @@ private:
         return report_failure(err);
       }
       note_drops(msg);
-      if (stopping_.load())
+      if (watch_.stopping())
         return;
       dispatch(*handler_, frame, static_cast<size_t>(n));
-      if (stopping_.load())
+      if (watch_.stopping())
         return;
     }
   }
@@ -398,14 +363,9 @@ private:
   mutable std::shared_mutex fd_mtx_;
   unique_fd fd_;
 
-  /// Guards the life cycle (start, stop); never held across run_sync nor
-  /// during a handler call.
-  std::mutex life_mtx_;
-  state state_ = state::opened;
-  /// Set by start; read by send() (post_tx_failure) on any thread.
-  std::atomic<event_loop*> loop_{nullptr};
-  /// Set by stop (on the loop thread once started): delivery ends at once.
-  std::atomic<bool> stopping_{false};
+  /// The life cycle (start, stop) on the event loop; its loop() is read by
+  /// send() (post_tx_failure) on any thread.
+  loop_watch watch_;
   /// on_failure was called (loop thread).
   bool failed_ = false;
   std::atomic<int> tx_down_errno_{0};

@@ -32,7 +32,7 @@
 // thread (run_sync) it unwatches the tty, discards what was not sent,
 // closes the line and drops the handler; no handler call follows its
 // return. Called from a handler it ends delivery at once: the callback sees
-// stopping_ and touches the descriptor no more.
+// watch_.stopping() and touches the descriptor no more.
 //
 // Ownership of the line: flock(LOCK_EX | LOCK_NB) on the open tty
 // (LOCK_SH with exclusive: false), as picocom and other serial tools do.
@@ -66,9 +66,10 @@
 #include <vector>
 
 #include "channels/error.hpp"
+#include "channels/drivers/loop_watch.hpp"
+#include "channels/drivers/posix.hpp"
 #include "channels/drivers/serial_framing.hpp"
 #include "channels/drivers/serial_settings.hpp"
-#include "channels/drivers/posix.hpp"
 #include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
@@ -232,56 +233,24 @@ public:
   /// Watches the tty on `loop`; see the file comment for the contract.
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    caf::error result;
-    loop.run_sync([&] {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ != state::opened) {
-        result = fail(ec::device_unavailable, state_ == state::running
-                                                ? "already started"
-                                                : "already stopped");
-        return;
-      }
-      if (!handler) {
-        result = fail(ec::invalid_parameter, "start needs a frame handler");
-        return;
-      }
-      std::lock_guard<std::mutex> tx_guard{tx_mtx_};
-      // Bytes sent before start wait for the line.
-      out_armed_ = tx_head_ < tx_.size();
-      if (auto err = loop.watch(fd_, out_armed_ ? EPOLLIN | EPOLLOUT : EPOLLIN,
-                                [this](uint32_t events) { on_ready(events); })) {
-        out_armed_ = false;
-        result = fail(ec::device_unavailable,
-                      "cannot watch the line: " + render(err));
-        return;
-      }
-      handler_ = std::move(handler);
-      loop_ = &loop;
-      state_ = state::running;
-    });
-    return result;
+    return watch_.start(
+      loop, fd_, handler != nullptr, "line",
+      [this](ec code, const std::string& what) { return fail(code, what); },
+      nullptr, [this](uint32_t events) { on_ready(events); },
+      [&] {
+        handler_ = std::move(handler);
+        // Bytes sent before start (or while it ran) wait for the line.
+        std::lock_guard<std::mutex> tx_guard{tx_mtx_};
+        if (tx_head_ < tx_.size())
+          watch_output();
+      });
   }
 
   /// Closes the line. Bytes not yet on the wire (driver buffer and kernel
   /// output queue) are discarded, so that closing never waits for a
   /// stalled line.
   void stop() override {
-    event_loop* loop;
-    {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ == state::stopped)
-        return;
-      if (state_ == state::opened) { // never started: nothing is watched
-        close_line();
-        return;
-      }
-      loop = loop_;
-    }
-    loop->run_sync([this] {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ != state::running)
-        return; // another stop came first
-      loop_->unwatch(fd_);
+    watch_.stop([this] {
       close_line();
       handler_.reset();
     });
@@ -441,18 +410,14 @@ public:
   }
 
 private:
-  enum class state { opened, running, stopped };
-
   caf::error fail(ec code, const std::string& what) const {
     return make_error(code, prefix_ + what);
   }
 
-  /// Ends delivery and closes the line. Requires life_mtx_; on the loop
+  /// Discards what was not sent and closes the line (stop). On the loop
   /// thread once started.
   void close_line() {
-    stopping_ = true;
     *alive_ = false;
-    state_ = state::stopped;
     std::lock_guard<std::mutex> tx_guard{tx_mtx_};
     tx_.clear();
     tx_head_ = 0;
@@ -466,19 +431,20 @@ private:
   /// Has the loop watch for EPOLLOUT while bytes wait. Requires tx_mtx_;
   /// any thread.
   void watch_output() {
-    if (out_armed_ || loop_ == nullptr || failed_)
-      return; // loop_ is null before start: start watches EPOLLOUT then.
+    auto* loop = watch_.loop();
+    if (out_armed_ || loop == nullptr || failed_)
+      return; // no loop before start: start watches EPOLLOUT then.
     out_armed_ = true;
-    if (loop_->in_loop_thread()) {
-      loop_->modify(fd_, EPOLLIN | EPOLLOUT);
+    if (loop->in_loop_thread()) {
+      loop->modify(fd_, EPOLLIN | EPOLLOUT);
       return;
     }
-    loop_->post([this, alive = alive_] {
+    loop->post([this, loop, alive = alive_] {
       if (!*alive)
         return;
       std::lock_guard<std::mutex> guard{tx_mtx_};
       if (out_armed_ && !failed_)
-        loop_->modify(fd_, EPOLLIN | EPOLLOUT);
+        loop->modify(fd_, EPOLLIN | EPOLLOUT);
     });
   }
 
@@ -517,7 +483,7 @@ private:
         err = write_pending();
         if (err == 0 && out_armed_) {
           out_armed_ = false;
-          loop_->modify(fd_, EPOLLIN);
+          watch_.loop()->modify(fd_, EPOLLIN);
         }
       }
       if (err != 0 && err != EAGAIN)
@@ -532,12 +498,12 @@ private:
   bool read_input() {
     auto on_frame = [this](const uint8_t* data, size_t size) {
       ++rx_frames_;
-      if (!stopping_)
+      if (!watch_.stopping())
         handler_->on_frame(peer_addr, data, size);
     };
     auto on_malformed = [this](serial::rx_error why) {
       ++rx_errors_[static_cast<size_t>(why)];
-      if (!stopping_)
+      if (!watch_.stopping())
         handler_->on_malformed(self_addr, to_string(why));
     };
     for (int i = 0; i < rx_reads_per_turn; ++i) {
@@ -547,7 +513,7 @@ private:
         dec_.feed(rx_buf_.data(), static_cast<size_t>(n), on_frame,
                   on_malformed);
         rx_idle_.store(dec_.stats().idle);
-        if (stopping_)
+        if (watch_.stopping())
           return false;
         if (static_cast<size_t>(n) < rx_buf_.size())
           return true; // the tty had no more
@@ -570,7 +536,7 @@ private:
 
   /// Reports the end of the line once and stops watching the tty.
   void report_failure(const std::string& what) {
-    if (stopping_)
+    if (watch_.stopping())
       return;
     {
       std::lock_guard<std::mutex> guard{tx_mtx_};
@@ -578,7 +544,7 @@ private:
         return;
       out_armed_ = false;
     }
-    loop_->unwatch(fd_);
+    watch_.unwatch();
     handler_->on_failure(
       fail(ec::device_failed, "serial line " + set_.path + ": " + what));
   }
@@ -607,14 +573,8 @@ private:
   std::atomic<uint64_t> bandwidth_;
   std::atomic<int64_t> char_ns_;
 
-  // Life cycle. life_mtx_ guards state_, loop_ (written under tx_mtx_ too
-  // by start) and handler_; it is never held across run_sync nor during a
-  // handler call.
-  std::mutex life_mtx_;
-  state state_ = state::opened;
-  event_loop* loop_ = nullptr;
-  /// Set by stop (on the loop thread once started): delivery ends at once.
-  std::atomic<bool> stopping_{false};
+  // Life cycle (start, stop) on the event loop.
+  loop_watch watch_;
   std::atomic<bool> failed_{false};
   /// Cleared by stop; tasks posted to the loop check it first.
   std::shared_ptr<std::atomic<bool>> alive_

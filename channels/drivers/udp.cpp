@@ -16,7 +16,7 @@
 // thread: it unwatches the socket on the loop thread (run_sync), closes it
 // and drops the handler; no handler call follows its return. Called from a
 // handler (on the loop thread, run_sync runs inline) it ends delivery at
-// once: the callback sees stopping_ and touches nothing more. send() may be
+// once: the callback sees watch_.stopping() and touches nothing more. send() may be
 // called from any thread; it holds a shared lock so that stop() cannot close
 // the socket under it. Datagrams from our own port and one of this host's
 // (namespace's) IPv4 addresses, snapshotted by getifaddrs in start(), are
@@ -42,9 +42,10 @@
 #include <vector>
 
 #include "channels/error.hpp"
+#include "channels/drivers/loop_watch.hpp"
 #include "channels/drivers/params.hpp"
-#include "channels/drivers/udp_addr.hpp"
 #include "channels/drivers/posix.hpp"
+#include "channels/drivers/udp_addr.hpp"
 #include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
@@ -115,52 +116,21 @@ public:
   /// Watches the socket on `loop`; see the file comment for the contract.
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    caf::error result;
-    loop.run_sync([&] {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ != state::opened) {
-        result = fail(ec::device_unavailable, state_ == state::running
-                                                ? "already started"
-                                                : "already stopped");
-        return;
-      }
-      if (!handler) {
-        result = fail(ec::invalid_parameter, "start needs a frame handler");
-        return;
-      }
-      if ((result = collect_own_ips()))
-        return;
-      allocate_buffers();
-      if (auto err = loop.watch(fd_, EPOLLIN,
-                                [this](uint32_t events) { on_ready(events); })) {
-        result = fail(ec::device_unavailable,
-                      "cannot watch the socket: " + render(err));
-        return;
-      }
-      handler_ = std::move(handler);
-      loop_ = &loop;
-      state_ = state::running;
-    });
-    return result;
+    return watch_.start(
+      loop, fd_, handler != nullptr, "socket",
+      [this](ec code, const std::string& what) { return fail(code, what); },
+      [this] {
+        if (auto err = collect_own_ips())
+          return err;
+        allocate_buffers();
+        return caf::error{};
+      },
+      [this](uint32_t events) { on_ready(events); },
+      [&] { handler_ = std::move(handler); });
   }
 
   void stop() override {
-    event_loop* loop;
-    {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ == state::stopped)
-        return;
-      if (state_ == state::opened) { // never started: nothing is watched
-        close_socket();
-        return;
-      }
-      loop = loop_;
-    }
-    loop->run_sync([this] {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (state_ != state::running)
-        return; // another stop came first
-      loop_->unwatch(fd_);
+    watch_.stop([this] {
       close_socket();
       handler_.reset();
     });
@@ -233,17 +203,12 @@ public:
   }
 
 private:
-  enum class state { opened, running, stopped };
-
   caf::error fail(ec code, const std::string& what) const {
     return make_error(code, "device '" + cfg_.device + "': " + what);
   }
 
-  /// Ends delivery and closes the socket. Requires life_mtx_; on the loop
-  /// thread once started.
+  /// Closes the socket (stop). On the loop thread once started.
   void close_socket() {
-    stopping_ = true;
-    state_ = state::stopped;
     std::unique_lock<std::shared_mutex> fd_guard{fd_mtx_};
     ::close(fd_);
     fd_ = -1;
@@ -324,7 +289,7 @@ private:
   /// Reports the failure once and stops watching the socket (send() keeps
   /// working until stop). Loop thread.
   void report_failure(const std::string& what, int err) {
-    loop_->unwatch(fd_);
+    watch_.unwatch();
     handler_->on_failure(
       fail(ec::device_failed, what + " on " + udp::format_addr(local_) + ": "
                                 + errno_text(err)));
@@ -378,7 +343,7 @@ private:
         auto& msg = msgs_[static_cast<size_t>(i)];
         auto& name = names_[static_cast<size_t>(i)];
         note_drops(msg.msg_hdr);
-        if (stopping_)
+        if (watch_.stopping())
           return;
         if (is_own(name))
           continue;
@@ -392,7 +357,7 @@ private:
                              static_cast<const uint8_t*>(
                                msg.msg_hdr.msg_iov->iov_base),
                              msg.msg_len);
-        if (stopping_)
+        if (watch_.stopping())
           return;
       }
       return;
@@ -418,13 +383,8 @@ private:
   mutable std::shared_mutex fd_mtx_;
   int fd_;
 
-  /// Guards the life cycle (start, stop); never held across run_sync nor
-  /// during a handler call.
-  std::mutex life_mtx_;
-  state state_ = state::opened;
-  event_loop* loop_ = nullptr;
-  /// Set by stop (on the loop thread once started): delivery ends at once.
-  std::atomic<bool> stopping_{false};
+  /// The life cycle (start, stop) on the event loop.
+  loop_watch watch_;
   std::shared_ptr<frame_handler> handler_;
 
   // The loop thread's once started.
