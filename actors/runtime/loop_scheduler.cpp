@@ -29,7 +29,7 @@ namespace herm {
 
 namespace {
 
-constexpr const char* busy_poll_key = "herm.busy-poll-us";
+constexpr char busy_poll_key[] = "herm.busy-poll-us";
 
 /// CAF's simple clock behind a mutex. The loop thread asks it for the next
 /// due time before it sleeps and fires what is due after each wait; another
