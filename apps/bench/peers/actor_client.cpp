@@ -46,6 +46,8 @@ using rtt_client_actor = caf::stateful_actor<rtt_client_state>;
 
 void send_next(rtt_client_actor* self) {
   auto& st = self->state;
+  if (st.next == st.params.warmup)
+    timed_part_begins(); // probes.hpp: between two round trips
   fill_payload(st.payload, st.next);
   st.t0 = now_ns();
   self->request(st.target, st.params.timeout, st.payload)
@@ -64,6 +66,7 @@ void send_next(rtt_client_actor* self) {
         if (s.next >= s.params.warmup)
           s.result.rtt_ns.push_back(t1 - s.t0);
         if (++s.next == s.params.warmup + s.params.count) {
+          timed_part_ends();
           finish(self);
           return;
         }

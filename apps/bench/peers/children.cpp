@@ -4,6 +4,8 @@
 
 #include "apps/bench/peers/children.hpp"
 
+#include "apps/bench/peers/probes.hpp"
+
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -43,7 +45,9 @@ struct child {
   std::string buffer;
 };
 
-std::optional<child> spawn(const std::vector<std::string>& args) {
+/// Starts `args` with its stdout on a pipe, pinned to `cpu` (-1: not
+/// pinned); a child that cannot be pinned says so on that pipe and exits.
+std::optional<child> spawn(const std::vector<std::string>& args, int cpu) {
   int fds[2];
   if (::pipe2(fds, O_CLOEXEC) != 0)
     return std::nullopt;
@@ -56,6 +60,11 @@ std::optional<child> spawn(const std::vector<std::string>& args) {
     return std::nullopt;
   if (pid == 0) {
     ::dup2(fds[1], STDOUT_FILENO);
+    if (cpu >= 0 && !pin_to_cpu(cpu)) {
+      static const char msg[] = "error cannot pin the process to its vCPU\n";
+      [[maybe_unused]] auto n = ::write(STDOUT_FILENO, msg, sizeof(msg) - 1);
+      ::_exit(127);
+    }
     ::execv(argv[0], argv.data());
     ::_exit(127);
   }
@@ -150,7 +159,11 @@ std::vector<std::string> endpoint_args(const std::string& exe, const std::string
           "--ack-every", std::to_string(p.ack_every),
           "--stall-ms", std::to_string(p.stall.count()),
           "--batch", p.batch ? "1" : "0",
-          "--tag", p.tag};
+          "--tag", p.tag,
+          "--counter-fd", std::to_string(p.counter_fd),
+          "--server-pid", std::to_string(p.server_pid),
+          "--router-pid", std::to_string(p.router_pid),
+          "--count-syscalls", p.count_syscalls ? "1" : "0"};
 }
 
 /// Distinct free UDP ports.
@@ -164,19 +177,38 @@ std::vector<uint16_t> free_udp_ports(size_t n) {
   return ports;
 }
 
-/// Parses a client's result line ("rtt N t1 .. tN" or "oneway SENT RECEIVED
-/// ELAPSED_NS STALLS CLIENT_ALLOCS SERVER_ALLOCS").
+} // namespace
+
+std::string format_counts(const case_counts& c) {
+  std::string out = "counts";
+  for (auto& x : c)
+    for (auto v : {x.wakeups, x.voluntary_switches, x.allocs, x.syscalls})
+      out += " " + std::to_string(v);
+  return out;
+}
+
 std::variant<client_result, std::string> parse_result(const std::string& out) {
   client_result res;
   if (out.rfind("rtt ", 0) == 0) {
     std::istringstream in{out.substr(4)};
     size_t n = 0;
     in >> n;
+    if (!in || n > 100'000'000)
+      return std::string{"client: malformed result"};
     res.rtt_ns.resize(n);
     for (auto& x : res.rtt_ns)
       in >> x;
     if (!in)
       return std::string{"client: truncated result"};
+    std::string word;
+    if (in >> word) {
+      if (word != "counts")
+        return "client: unexpected '" + word + "' after the round trips";
+      for (auto& x : res.counts)
+        in >> x.wakeups >> x.voluntary_switches >> x.allocs >> x.syscalls;
+      if (!in)
+        return std::string{"client: truncated counts"};
+    }
     return res;
   }
   if (out.rfind("oneway ", 0) == 0) {
@@ -190,11 +222,10 @@ std::variant<client_result, std::string> parse_result(const std::string& out) {
   return "client: " + out;
 }
 
-} // namespace
-
 /// One repetition of one case: fresh processes (a router, a server, a client
 /// as the mode needs).
-std::variant<client_result, std::string> run_pair(const std::string& exe, endpoint_params p) {
+std::variant<client_result, std::string> run_pair(const std::string& exe, endpoint_params p,
+                                                  const placement& where) {
   static int serial = 0;
   ++serial;
   if (p.transport == "herm" || p.mode == "inprocess") {
@@ -211,16 +242,24 @@ std::variant<client_result, std::string> run_pair(const std::string& exe, endpoi
   } else {
     p.port = 0;
   }
+  // The children inherit the page; this process needs it no longer once the
+  // last of them has started.
+  p.counter_fd = make_counter_page();
   std::vector<child> helpers; // router, server
   auto stop_all = [&] {
     for (auto i = helpers.rbegin(); i != helpers.rend(); ++i)
       stop(*i);
+    if (p.counter_fd >= 0)
+      ::close(p.counter_fd);
+    p.counter_fd = -1;
   };
   auto start_helper = [&](const std::string& role) -> std::string {
-    auto c = spawn(endpoint_args(exe, role, p));
+    auto c = spawn(endpoint_args(exe, role, p), role == "router" ? where.router_cpu
+                                                                 : where.server_cpu);
     if (!c)
       return "cannot start the " + role;
     helpers.push_back(*c);
+    (role == "router" ? p.router_pid : p.server_pid) = c->pid;
     auto line = read_line(helpers.back(), std::chrono::steady_clock::now() + 30s);
     if (!line || line->rfind("ready ", 0) != 0)
       return role + ": " + (line ? *line : std::string{"no ready line within 30 s"});
@@ -245,7 +284,7 @@ std::variant<client_result, std::string> run_pair(const std::string& exe, endpoi
       stop_all();
       return err;
     }
-  auto client = spawn(endpoint_args(exe, "client", p));
+  auto client = spawn(endpoint_args(exe, "client", p), where.client_cpu);
   if (!client) {
     stop_all();
     return std::string{"cannot start the client"};

@@ -17,7 +17,15 @@
 // every repetition, this process starts a fresh server and a fresh client
 // (itself, re-executed with --role server / --role client), so no state
 // carries over between cases. The client times each round trip with the
-// monotonic clock and hands the times back on its stdout. Transports:
+// monotonic clock and hands the times back on its stdout.
+//
+// Placements (--placements): every case runs in each, with raw UDP and DDS
+// alongside, so ratios are taken within a placement: one-cpu (every
+// process of the case pinned to vCPU 0) and per-cpu (server and router on
+// vCPU 0, client on vCPU 1). Next to the times, per round trip and process
+// (probes.hpp): thread wake-ups and voluntary switches and allocations over
+// the timed part, and syscalls from a separate shorter counting pass
+// (--syscall-count). Transports:
 // transport.hpp; the table and the JSON hold every figure. Exit status 0
 // when every available transport completed every case with positive
 // figures, 1 otherwise, 2 on bad arguments.
@@ -43,7 +51,10 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "apps/bench/peers/cases.hpp"
 #include "apps/bench/peers/children.hpp"
+#include "apps/bench/peers/per_round_trip.hpp"
+#include "apps/bench/peers/probes.hpp"
 #include "apps/bench/peers/transport.hpp"
 
 using namespace herm::bench;
@@ -53,41 +64,28 @@ namespace {
 
 // -- what is measured ---------------------------------------------------------------
 
-/// One transport as measured: a family (the server and client functions)
-/// and, for the actor transports, a scheduler policy.
-struct variant {
-  std::string name;   // "herm/loop"
-  std::string family; // "herm"
-  std::string policy; // "loop", "sharing:1", "sharing", "stealing" or empty
-  std::string label;  // for people
-  bool batch = false; // udp oneway: sendmmsg
-};
-
-struct mode {
-  std::string name; // "back-to-back", "gap-10ms", "oneway", "inprocess", "router"
-  std::string kind; // what the endpoints do: "rtt", "oneway", "inprocess", "router"
-  std::chrono::microseconds gap;
-  uint32_t count;
-  uint32_t warmup;
-  bool latency() const {
-    return kind != "oneway";
-  }
-};
-
 struct run_figures {
   double p50 = 0, p99 = 0, min = 0, max = 0, mean = 0; // µs
   size_t n = 0;
   // oneway
   double msgs_per_s = 0, client_allocs = -1, server_allocs = -1;
   uint64_t sent = 0, received = 0, lost = 0, stalls = 0;
+  // latency modes: counts per round trip of the timed part (syscalls: -1,
+  // they come from the counting pass)
+  per_rt counts = unmeasured();
 };
 
 struct case_result {
   variant v;
   const mode* m = nullptr;
   size_t size = 0;
+  const placement* where = nullptr;
   std::vector<run_figures> runs;
   std::vector<std::string> errors;
+  // latency modes: the syscall counting pass (probes.hpp), once per case
+  per_rt syscall_pass = unmeasured();
+  uint32_t syscall_round_trips = 0;
+  std::string syscall_error;
 };
 
 double percentile(const std::vector<double>& sorted, double q) {
@@ -130,8 +128,14 @@ int run_endpoint(const std::string& role, const endpoint_params& p) {
     {"caf", {caf_server, caf_client}},   {"zmq", {zmq_server, zmq_client}},
     {"dds", {dds_server, dds_client}},
   };
+  if (p.counter_fd >= 0)
+    attach_counter_page(p.counter_fd, role == "router"   ? slot_router
+                                      : role == "server" ? slot_server
+                                                         : slot_client);
   if (p.mode == "oneway")
     alloc_counting(true);
+  if (role == "client")
+    set_case_processes(p.server_pid, p.router_pid, p.count_syscalls);
   if (role == "router")
     return herm_router(p);
   client_result res;
@@ -162,6 +166,7 @@ int run_endpoint(const std::string& role, const endpoint_params& p) {
     line = "rtt " + std::to_string(res.rtt_ns.size());
     for (auto x : res.rtt_ns)
       line += " " + std::to_string(x);
+    line += " " + format_counts(timed_part_counts());
   }
   std::cout << line << std::endl;
   std::cout.flush();
@@ -201,6 +206,7 @@ struct summary {
   double p50 = 0, p50_min = 0, p50_max = 0, p99 = 0, min = 0, max = 0;
   double msgs = 0, msgs_min = 0, msgs_max = 0, lost = 0, stalls = 0;
   double client_allocs = -1, server_allocs = -1;
+  per_rt counts = unmeasured(); // timed runs' medians, the counting pass's syscalls
 };
 
 double min_of(const std::vector<double>& xs) {
@@ -239,75 +245,11 @@ summary summarize(const case_result& c) {
   s.stalls = median(stalls);
   s.client_allocs = median(ca);
   s.server_allocs = median(sa);
+  std::vector<per_rt> counts;
+  for (auto& r : c.runs)
+    counts.push_back(r.counts);
+  s.counts = with_syscalls(median_of(counts), c.syscall_pass);
   return s;
-}
-
-/// "sharing:1" -> "sharing scheduler, 1 worker".
-std::string policy_label(const std::string& policy) {
-  auto [name, threads] = split_policy(policy);
-  if (name == "loop")
-    return threads == 0
-             ? "loop scheduler (one thread runs the actors and the sockets)"
-             : "loop scheduler, busy-polling " + std::to_string(threads) + " us";
-  if (threads == 0)
-    return name + " scheduler, one worker per core ("
-           + std::to_string(std::thread::hardware_concurrency()) + ")";
-  return name + " scheduler, " + std::to_string(threads)
-         + (threads == 1 ? " worker" : " workers");
-}
-
-bool has(const std::vector<std::string>& xs, const std::string& x) {
-  return std::find(xs.begin(), xs.end(), x) != xs.end();
-}
-
-/// The variants a mode measures, of the families selected.
-std::vector<variant> variants_for(const mode& m, const std::vector<std::string>& families,
-                                  const std::vector<std::string>& policies) {
-  std::vector<variant> out;
-  auto actor = [&](const std::string& family, const std::string& what) {
-    for (auto& pol : policies)
-      out.push_back({family + "/" + pol, family, pol, what + ", " + policy_label(pol)});
-  };
-  if (m.kind == "inprocess") {
-    if (has(families, "herm")) {
-      actor("herm", "HERM in one process: proxy bound by name on the same module "
-                    "(a local match: the APO itself)");
-      actor("herm-rebind", "HERM in one process: rebinding proxy bound by name on the "
-                           "same module (through the application support actor)");
-    }
-    if (has(families, "caf"))
-      actor("caf-local", "plain CAF request to the echo actor in one process");
-    return out;
-  }
-  if (m.kind == "router") {
-    if (has(families, "herm"))
-      actor("herm", "HERM APO request across a router module (udp A-R, R-B)");
-    return out;
-  }
-  bool oneway = m.kind == "oneway";
-  for (auto& f : families) {
-    if (f == "udp") {
-      if (oneway) {
-        out.push_back({"udp", "udp", "", "raw UDP, one blocking socket, send loop (the floor)"});
-        out.push_back({"udp/sendmmsg", "udp", "",
-                       "raw UDP, one blocking socket, sendmmsg batches of up to 64", true});
-      } else {
-        out.push_back({"udp", "udp", "", "raw UDP, blocking sockets (the floor)"});
-      }
-    } else if (f == "herm") {
-      actor("herm", oneway ? "HERM one-way send through a proxy to a counting APO, udp link"
-                           : "HERM APO request through a proxy, udp link");
-    } else if (f == "caf") {
-      actor("caf", oneway ? "CAF 0.17 io::middleman remote actor (TCP), one-way send"
-                          : "CAF 0.17 io::middleman remote actor (TCP)");
-    } else if (f == "zmq") {
-      out.push_back({"zmq", "zmq", "", oneway ? "ZeroMQ PUSH/PULL (TCP)" : "ZeroMQ REQ/REP (TCP)"});
-    } else if (f == "dds") {
-      out.push_back({"dds", "dds", "",
-                     oneway ? "Cyclone DDS, reliable, keep-all" : "Cyclone DDS, reliable, keep-last 1"});
-    }
-  }
-  return out;
 }
 
 } // namespace
@@ -320,7 +262,9 @@ int main(int argc, char** argv) {
   uint32_t hello_ms = 1000, gap_us = 0, timeout_ms = 2000, stall_ms = 100;
   std::string only, sizes_arg = "16,256,1400", policies_arg = "loop,sharing:1,stealing";
   std::string modes_arg, oneway_sizes_arg = "64";
-  std::string json_path;
+  std::string json_path, placements_arg = "one-cpu,per-cpu";
+  uint32_t syscall_count = 200;
+  int count_syscalls = 0;
   uint32_t count = 2000, warmup = 200, gap_count = 300, gap_warmup = 20;
   uint32_t oneway_count = 20000, oneway_warmup = 1000;
   uint32_t gap_ms = 10, repeat = 3;
@@ -346,9 +290,11 @@ int main(int argc, char** argv) {
          count_option{"--window", &ep.window, "oneway: most unacknowledged messages (128)"},
          count_option{"--ack-every", &ep.ack_every, "oneway: the receiver acknowledges every N messages (16)"},
          count_option{"--stall-ms", &stall_ms, "oneway: a window full for this long is reopened and counted as a stall (100)"},
-         count_option{"--repeat", &repeat, "repetitions of every case (3)"}})
+         count_option{"--repeat", &repeat, "repetitions of every case (3)"},
+         count_option{"--syscall-count", &syscall_count, "round trips of each latency case's separate syscall counting pass (200; 0: none)"}})
     app.add_option(o.name, *o.value, o.help);
   app.add_option("--json", json_path, "write every figure to this file");
+  app.add_option("--placements", placements_arg, "where the processes of every case run, comma-separated: one-cpu (all on vCPU 0), per-cpu (server and router on vCPU 0, client on vCPU 1), any (unpinned) (default: one-cpu,per-cpu)");
   app.add_flag("--quick", quick, "a short smoke run: 256 bytes (oneway 64), 1 repetition, few round trips, 100 ms hellos");
   app.add_option("--hello-ms", hello_ms, "herm: routing hello interval, ms (1000, HERM's default)");
   app.add_option("--timeout-ms", timeout_ms, "a round trip slower than this fails the case (2000)");
@@ -365,11 +311,16 @@ int main(int argc, char** argv) {
   app.add_option("--gap-us", gap_us)->group("");
   app.add_option("--batch", batch)->group("");
   app.add_option("--tag", ep.tag)->group("");
+  app.add_option("--counter-fd", ep.counter_fd)->group("");
+  app.add_option("--server-pid", ep.server_pid)->group("");
+  app.add_option("--router-pid", ep.router_pid)->group("");
+  app.add_option("--count-syscalls", count_syscalls)->group("");
   CLI11_PARSE(app, argc, argv);
   ep.hello = std::chrono::milliseconds(hello_ms);
   ep.timeout = std::chrono::milliseconds(timeout_ms);
   ep.stall = std::chrono::milliseconds(stall_ms);
   ep.batch = batch != 0;
+  ep.count_syscalls = count_syscalls != 0;
 
   if (role == "server" || role == "client" || role == "router") {
     ep.count = count;
@@ -396,7 +347,8 @@ int main(int argc, char** argv) {
                           quick_default{"--gap-warmup", &gap_warmup, 2},
                           quick_default{"--oneway-count", &oneway_count, 2000},
                           quick_default{"--oneway-warmup", &oneway_warmup, 200},
-                          quick_default{"--repeat", &repeat, 1}})
+                          quick_default{"--repeat", &repeat, 1},
+                          quick_default{"--syscall-count", &syscall_count, 50}})
       if (app.count(d.option) == 0)
         *d.value = d.quick;
     if (app.count("--sizes") == 0)
@@ -457,6 +409,33 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  // Where the processes run (children.hpp); a placement this machine cannot
+  // give (one vCPU) is skipped with the reason, like a missing transport.
+  const std::vector<placement> known_placements{
+    {"one-cpu", 0, 0, 0}, {"per-cpu", 1, 0, 0}, {"any", -1, -1, -1}};
+  std::vector<placement> placements;
+  std::vector<std::pair<std::string, std::string>> skipped_placements;
+  for (auto& name : split(placements_arg)) {
+    auto i = std::find_if(known_placements.begin(), known_placements.end(),
+                          [&](const placement& x) { return x.name == name; });
+    if (i == known_placements.end()) {
+      std::cerr << "--placements: unknown placement '" << name << "' (one-cpu, per-cpu, any)"
+                << std::endl;
+      return 2;
+    }
+    std::string why;
+    for (int cpu : {i->client_cpu, i->server_cpu, i->router_cpu})
+      if (cpu >= 0 && !cpu_allowed(cpu))
+        why = "vCPU " + std::to_string(cpu) + " is not available to this process";
+    if (why.empty())
+      placements.push_back(*i);
+    else
+      skipped_placements.emplace_back(name, why);
+  }
+  if (placements.empty()) {
+    std::cerr << "--placements: none of the placements can run on this machine" << std::endl;
+    return 2;
+  }
   auto gap_name = "gap-" + std::to_string(gap_ms) + "ms";
   std::vector<mode> all_modes{
     {"back-to-back", "rtt", 0us, count, warmup},
@@ -487,31 +466,38 @@ int main(int argc, char** argv) {
   auto load_before = read_first_line("/proc/loadavg");
   for (auto& [name, why] : skipped)
     std::cout << "skipped " << name << ": " << why << std::endl;
+  for (auto& [name, why] : skipped_placements)
+    std::cout << "skipped placement " << name << ": " << why << std::endl;
 
   // Repetitions outermost, so slow drifts of the machine's load spread over
   // every transport alike.
   std::vector<case_result> results;
   for (auto& m : modes)
-    for (auto size : m.kind == "oneway" ? oneway_sizes : sizes)
-      for (auto& v : variants_for(m, available, policies))
-        results.push_back({v, &m, size, {}, {}});
+    for (auto& where : placements)
+      for (auto size : m.kind == "oneway" ? oneway_sizes : sizes)
+        for (auto& v : variants_for(m, available, policies)) {
+          results.push_back({v, &m, size, &where, {}, {}});
+        }
   auto exe = self_exe();
-  size_t total = results.size() * repeat, done = 0;
+  auto params_for = [&](const case_result& c) {
+    endpoint_params p = ep;
+    p.transport = c.v.family;
+    p.mode = c.m->kind;
+    p.policy = c.v.policy;
+    p.batch = c.v.batch;
+    p.size = c.size;
+    p.count = c.m->count;
+    p.warmup = c.m->warmup;
+    p.gap = c.m->gap;
+    return p;
+  };
+  size_t runs_total = results.size() * repeat, done = 0;
   for (uint32_t r = 0; r < repeat; ++r) {
     for (auto& c : results) {
-      endpoint_params p = ep;
-      p.transport = c.v.family;
-      p.mode = c.m->kind;
-      p.policy = c.v.policy;
-      p.batch = c.v.batch;
-      p.size = c.size;
-      p.count = c.m->count;
-      p.warmup = c.m->warmup;
-      p.gap = c.m->gap;
-      auto out = run_pair(exe, p);
+      auto out = run_pair(exe, params_for(c), *c.where);
       ++done;
-      std::cerr << "[" << done << "/" << total << "] " << c.v.name << " " << c.m->name << " "
-                << c.size << " B run " << (r + 1) << ": ";
+      std::cerr << "[" << done << "/" << runs_total << "] " << c.v.name << " " << c.m->name << " "
+                << c.size << " B " << c.where->name << " run " << (r + 1) << ": ";
       if (auto* err = std::get_if<std::string>(&out)) {
         c.errors.push_back(*err);
         std::cerr << "FAILED " << *err << std::endl;
@@ -533,22 +519,51 @@ int main(int argc, char** argv) {
                   << " stalls" << std::endl;
       } else {
         f = summarize(res.rtt_ns);
+        f.counts = per_round_trip(res.counts, c.m->count);
         std::cerr << "p50 " << fmt(f.p50) << " us, p99 " << fmt(f.p99) << " us" << std::endl;
       }
       c.runs.push_back(f);
     }
+  }
+  // Syscalls: a separate, shorter pass per latency case, with perf counters
+  // on the syscall tracepoint that would slow the timed runs (probes.hpp).
+  auto syscalls_why = syscall_count == 0 ? std::string{"--syscall-count 0"}
+                                         : syscall_counting_unavailable();
+  if (!syscalls_why.empty())
+    std::cout << "syscalls per round trip: n/a, " << syscalls_why << std::endl;
+  for (auto& c : results) {
+    if (!syscalls_why.empty())
+      break;
+    if (!c.m->latency())
+      continue;
+    auto p = params_for(c);
+    p.count = std::min(p.count, syscall_count);
+    p.count_syscalls = true;
+    auto out = run_pair(exe, p, *c.where);
+    std::cerr << "[syscalls] " << c.v.name << " " << c.m->name << " " << c.size << " B "
+              << c.where->name << ": ";
+    if (auto* err = std::get_if<std::string>(&out)) {
+      c.syscall_error = *err;
+      std::cerr << "FAILED " << *err << std::endl;
+      continue;
+    }
+    c.syscall_pass = per_round_trip(std::get<client_result>(out).counts, p.count);
+    c.syscall_round_trips = p.count;
+    std::cerr << fmt(total(c.syscall_pass, f_syscalls)) << " per round trip" << std::endl;
   }
 
   // -- the table and the JSON ------------------------------------------------------------
   // Reference figures of the same run: raw UDP (and DDS) per mode and size,
   // plain CAF per policy and size (inprocess), direct herm per policy and
   // size (router: the back-to-back case).
-  std::map<std::tuple<std::string, std::string, size_t>, summary> by_name;
+  // Every reference is taken within the case's own placement.
+  std::map<std::tuple<std::string, std::string, size_t, std::string>, summary> by_name;
   for (auto& c : results)
     if (!c.runs.empty())
-      by_name[{c.v.name, c.m->name, c.size}] = summarize(c);
+      by_name[{c.v.name, c.m->name, c.size, c.where->name}] = summarize(c);
+  std::string where_now; // the placement of the case being reported
   auto ref = [&](const std::string& name, const std::string& mode_name, size_t size) {
-    auto i = by_name.find({name, mode_name, size});
+    auto i = by_name.find({name, mode_name, size, where_now});
     return i == by_name.end() ? summary{} : i->second;
   };
   auto ratio = [](double a, double b) { return a > 0 && b > 0 ? a / b : 0; };
@@ -567,28 +582,33 @@ int main(int argc, char** argv) {
       std::cout << "\n" << m.name << " (" << m.count << " messages after " << m.warmup
                 << " warm-up per run, window " << ep.window << ", acknowledged every "
                 << ep.ack_every << "; messages per second at the receiver, first to last)\n";
-      std::printf("%-22s %6s %10s %21s %6s %6s %7s %7s %13s\n", "transport", "bytes", "msgs/s",
-                  "range", "lost", "stalls", "/udp", "/dds", "allocs/msg c+s");
+      std::printf("%-22s %-8s %6s %10s %21s %6s %6s %7s %7s %13s\n", "transport", "placement",
+                  "bytes", "msgs/s", "range", "lost", "stalls", "/udp", "/dds", "allocs/msg c+s");
     } else {
       std::cout << "\n" << m.name << " (" << m.count << " round trips after " << m.warmup
                 << " warm-up per run)\n";
-      std::printf("%-22s %6s %9s %19s %9s %9s %9s %9s\n", "transport", "bytes", "p50",
-                  "p50 range", "p99", "min", "max",
-                  m.kind == "inprocess" ? "p50/caf" : m.kind == "router" ? "p50/direct" : "p50/udp");
+      std::printf("%-22s %-8s %6s %9s %19s %9s %9s %9s %10s %9s\n", "transport", "placement",
+                  "bytes", "p50", "p50 range", "p99", "min", "max",
+                  m.kind == "inprocess" ? "p50/caf" : m.kind == "router" ? "p50/direct" : "p50/udp",
+                  "p50/dds");
     }
     std::cout.flush();
+    std::string counts_rows; // latency modes: printed below the times
     for (auto& c : results) {
       if (c.m != &m)
         continue;
+      where_now = c.where->name;
       auto s = summarize(c);
       bool complete = c.errors.empty() && c.runs.size() == repeat;
       for (auto& r : c.runs)
         if (oneway ? !(r.msgs_per_s > 0 && r.received > 0)
                    : !(r.p50 > 0 && r.p99 > 0 && r.min > 0 && r.max > 0 && r.n == m.count))
           complete = false;
+      if (!c.syscall_error.empty())
+        complete = false;
       ok = ok && complete;
       auto size = c.size;
-      double r_udp = 0, r_dds = 0, r_main = 0;
+      double r_udp = 0, r_dds = 0, r_main = 0; // r_dds: rtt modes too
       if (oneway) {
         r_udp = ratio(s.msgs, ref("udp", m.name, size).msgs);
         r_dds = ratio(s.msgs, ref("dds", m.name, size).msgs);
@@ -598,25 +618,39 @@ int main(int argc, char** argv) {
         r_main = ratio(s.p50, ref(c.v.name, "back-to-back", size).p50);
       } else {
         r_main = ratio(s.p50, ref("udp", m.name, size).p50);
+        r_dds = ratio(s.p50, ref("dds", m.name, size).p50);
       }
       auto x = [&](double v) { return v > 0 ? fmt(v) + "x" : std::string{"-"}; };
       if (c.runs.empty()) {
-        std::printf("%-22s %6zu   FAILED: %s\n", c.v.name.c_str(), size,
+        std::printf("%-22s %-8s %6zu   FAILED: %s\n", c.v.name.c_str(), where_now.c_str(), size,
                     c.errors.empty() ? "" : c.errors.front().c_str());
       } else if (oneway) {
         auto range = fmt(s.msgs_min) + ".." + fmt(s.msgs_max);
         auto allocs = s.client_allocs >= 0 && s.server_allocs >= 0
                         ? fmt(s.client_allocs) + "+" + fmt(s.server_allocs)
                         : std::string{"-"};
-        std::printf("%-22s %6zu %10s %21s %6s %6s %7s %7s %13s%s\n", c.v.name.c_str(), size,
-                    fmt(s.msgs).c_str(), range.c_str(), fmt(s.lost).c_str(),
+        std::printf("%-22s %-8s %6zu %10s %21s %6s %6s %7s %7s %13s%s\n", c.v.name.c_str(),
+                    where_now.c_str(), size, fmt(s.msgs).c_str(), range.c_str(), fmt(s.lost).c_str(),
                     fmt(s.stalls).c_str(), x(r_udp).c_str(), x(r_dds).c_str(), allocs.c_str(),
                     complete ? "" : "  (incomplete)");
       } else {
         auto range = fmt(s.p50_min) + ".." + fmt(s.p50_max);
-        std::printf("%-22s %6zu %9s %19s %9s %9s %9s %9s%s\n", c.v.name.c_str(), size,
-                    fmt(s.p50).c_str(), range.c_str(), fmt(s.p99).c_str(), fmt(s.min).c_str(),
-                    fmt(s.max).c_str(), x(r_main).c_str(), complete ? "" : "  (incomplete)");
+        std::printf("%-22s %-8s %6zu %9s %19s %9s %9s %9s %10s %9s%s\n", c.v.name.c_str(),
+                    where_now.c_str(), size, fmt(s.p50).c_str(), range.c_str(),
+                    fmt(s.p99).c_str(), fmt(s.min).c_str(), fmt(s.max).c_str(),
+                    x(r_main).c_str(), x(r_dds).c_str(), complete ? "" : "  (incomplete)");
+        auto sum = [&](count_field f) {
+          auto t = total(s.counts, f);
+          return t < 0 ? std::string{"-"} : fmt(t);
+        };
+        char row[256];
+        std::snprintf(row, sizeof(row), "%-22s %-8s %6zu %15s %15s %15s %6s %15s %6s%s\n",
+                      c.v.name.c_str(), where_now.c_str(), size,
+                      cells(s.counts, f_wakeups).c_str(), cells(s.counts, f_vcsw).c_str(),
+                      cells(s.counts, f_syscalls).c_str(), sum(f_syscalls).c_str(),
+                      cells(s.counts, f_allocs).c_str(), sum(f_allocs).c_str(),
+                      c.syscall_error.empty() ? "" : "  (syscall pass failed)");
+        counts_rows += row;
       }
       std::fflush(stdout);
       nlohmann::json runs = nlohmann::json::array();
@@ -628,13 +662,19 @@ int main(int argc, char** argv) {
                           {"server_allocs_per_msg", r.server_allocs}});
         else
           runs.push_back({{"p50_us", r.p50}, {"p99_us", r.p99}, {"min_us", r.min},
-                          {"max_us", r.max}, {"mean_us", r.mean}, {"round_trips", r.n}});
+                          {"max_us", r.max}, {"mean_us", r.mean}, {"round_trips", r.n},
+                          {"per_round_trip", to_json(r.counts)}});
       }
       nlohmann::json js{{"transport", c.v.name},
                         {"family", c.v.family},
                         {"policy", c.v.policy},
                         {"label", c.v.label},
                         {"mode", m.name},
+                        {"placement", c.where->name},
+                        {"cpus",
+                         {{"client", c.where->client_cpu},
+                          {"server", c.where->server_cpu},
+                          {"router", c.where->router_cpu}}},
                         {"gap_us", m.gap.count()},
                         {"size", size},
                         {"complete", complete},
@@ -658,10 +698,59 @@ int main(int argc, char** argv) {
         js["min_us"] = s.min;
         js["max_us"] = s.max;
         js[ratio_name] = r_main;
+        if (m.kind == "rtt")
+          js["ratio_to_dds"] = r_dds;
+        // Per round trip, per process: wake-ups and allocations from the
+        // timed runs (median), syscalls from the counting pass.
+        auto or_null = [](double v) { return v < 0 ? nlohmann::json() : nlohmann::json(v); };
+        js["per_round_trip"] = to_json(s.counts);
+        js["wakeups_per_round_trip_most"] = or_null(most(s.counts, f_wakeups));
+        js["syscalls_per_round_trip"] = or_null(total(s.counts, f_syscalls));
+        js["allocs_per_round_trip"] = or_null(total(s.counts, f_allocs));
+        js["syscall_pass_round_trips"] = c.syscall_round_trips;
+        if (!c.syscall_error.empty())
+          js["syscall_pass_error"] = c.syscall_error;
       }
       cases.push_back(std::move(js));
     }
+    if (!counts_rows.empty()) {
+      std::cout << "\n" << m.name << ", per round trip and process (client/server[/router]): "
+                << "wake-ups (schedstat timeslices), voluntary switches, syscalls ("
+                << (syscalls_why.empty() ? "separate pass of up to " + std::to_string(syscall_count)
+                                             + " round trips"
+                                         : "n/a: " + syscalls_why)
+                << "), allocations (" << allocations_counted() << " calls)\n";
+      std::printf("%-22s %-8s %6s %15s %15s %15s %6s %15s %6s\n", "transport", "placement",
+                  "bytes", "wake-ups", "vol. switches", "syscalls", "sum", "allocs", "sum");
+      std::cout << counts_rows;
+    }
   }
+  // herm against raw UDP and DDS within each placement (issue 16's targets).
+  nlohmann::json placement_ratios = nlohmann::json::array();
+  std::string ratio_rows;
+  for (auto& m : modes) {
+    if (m.kind != "rtt")
+      continue;
+    for (auto& c : results) {
+      if (c.m != &m || c.v.family != "herm" || c.runs.empty())
+        continue;
+      where_now = c.where->name;
+      auto herm = ref(c.v.name, m.name, c.size).p50;
+      auto r_udp = ratio(herm, ref("udp", m.name, c.size).p50);
+      auto r_dds = ratio(herm, ref("dds", m.name, c.size).p50);
+      char row[160];
+      std::snprintf(row, sizeof(row), "  %-8s %-14s %5zu B  %-16s herm/udp %6s  herm/dds %6s\n",
+                    where_now.c_str(), m.name.c_str(), c.size, c.v.name.c_str(),
+                    r_udp > 0 ? (fmt(r_udp) + "x").c_str() : "-",
+                    r_dds > 0 ? (fmt(r_dds) + "x").c_str() : "-");
+      ratio_rows += row;
+      placement_ratios.push_back({{"placement", where_now}, {"mode", m.name}, {"size", c.size},
+                                  {"transport", c.v.name}, {"herm_over_udp", r_udp},
+                                  {"herm_over_dds", r_dds}});
+    }
+  }
+  if (!ratio_rows.empty())
+    std::cout << "\nRatios of p50 within each placement (same run):\n" << ratio_rows;
   // Every requested mode measured something: a mode left without a case
   // (--modes router --only udp) is an error, not a silent pass.
   for (auto& m : modes)
@@ -684,9 +773,10 @@ int main(int argc, char** argv) {
       joined += (joined.empty() ? "" : ", ") + x;
     std::cout << "  " << key.first << " (" << joined << "): " << key.second << "\n";
   }
-  std::cout << "  allocs/msg: operator-new calls per measured message in the sender (c) and "
-               "the receiver (s); C libraries' malloc calls (Cyclone DDS, part of libzmq) "
-               "are not seen\n";
+  std::cout << "  allocs/msg: allocations (" << allocations_counted()
+            << " calls) per measured message in the sender (c) and the receiver (s)\n";
+  std::cout << "  placements: one-cpu = every process of a case on vCPU 0; per-cpu = server "
+               "and router on vCPU 0, client on vCPU 1; any = unpinned\n";
   std::cout << "  herm and caf clients: one event-based actor, next request from the "
                "reply's then-callback; oneway: as many sends as the window allows\n";
   std::cout << (ok ? "all cases complete" : "SOME CASES FAILED") << std::endl;
@@ -697,6 +787,13 @@ int main(int argc, char** argv) {
     nlohmann::json skipped_json = nlohmann::json::array();
     for (auto& [name, why] : skipped)
       skipped_json.push_back({{"transport", name}, {"reason", why}});
+    nlohmann::json placements_json = nlohmann::json::array();
+    for (auto& pl : placements)
+      placements_json.push_back({{"name", pl.name}, {"client_cpu", pl.client_cpu},
+                                 {"server_cpu", pl.server_cpu}, {"router_cpu", pl.router_cpu}});
+    nlohmann::json skipped_placements_json = nlohmann::json::array();
+    for (auto& [name, why] : skipped_placements)
+      skipped_placements_json.push_back({{"placement", name}, {"reason", why}});
     nlohmann::json modes_json = nlohmann::json::array();
     for (auto& m : modes)
       modes_json.push_back({{"name", m.name}, {"kind", m.kind}, {"gap_us", m.gap.count()},
@@ -720,13 +817,26 @@ int main(int argc, char** argv) {
         {"window", ep.window},
         {"ack_every", ep.ack_every},
         {"stall_ms", stall_ms},
-        {"allocs_note", "client_allocs_per_msg/server_allocs_per_msg count operator-new "
-                        "calls only: C libraries' malloc calls (Cyclone DDS, part of "
-                        "libzmq) are not seen"},
+        {"allocs_counted", allocations_counted()},
+        {"allocs_note", std::string{"allocations are "} + allocations_counted()
+                          + " calls (malloc: every heap allocation, C libraries' "
+                            "included; operator new: sanitizer builds, C libraries' "
+                            "malloc calls not seen)"},
+        {"placements", placements_json},
+        {"skipped_placements", skipped_placements_json},
+        {"syscall_count", syscall_count},
+        {"syscalls_unavailable", syscalls_why},
+        {"counts_note", "per_round_trip: per process of the case; wakeups = sum over "
+                        "/proc/PID/task/*/schedstat field 3 (times scheduled in), "
+                        "voluntary_switches from /proc/PID/task/*/status, both over the "
+                        "timed runs (median); syscalls: perf counters on "
+                        "raw_syscalls:sys_enter in a separate pass of syscall_count "
+                        "round trips"},
         {"modes", modes_json}}},
       {"units", "microseconds; oneway: messages per second"},
       {"skipped", skipped_json},
       {"cases", cases},
+      {"placement_ratios", placement_ratios},
       {"ok", ok}};
     std::ofstream out{json_path};
     out << doc.dump(2) << "\n";

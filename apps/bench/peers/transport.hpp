@@ -12,6 +12,8 @@
 #include <utility>
 #include <vector>
 
+#include "apps/bench/peers/probes.hpp"
+
 namespace herm::bench {
 
 /// Splits "POLICY[:THREADS]" into the policy and the worker count (0: none
@@ -69,6 +71,15 @@ struct endpoint_params {
   bool batch = false;
   /// dds only: a tag that keeps this run's topics apart from others'.
   std::string tag = "0";
+  /// The case's shared counter page (an inherited memfd, see probes.hpp;
+  /// -1: none, allocations are then not reported).
+  int counter_fd = -1;
+  /// Client: the case's server and router processes (0: none), whose
+  /// wake-ups and allocations it reads around its timed part.
+  int server_pid = 0;
+  int router_pid = 0;
+  /// Client: count syscalls too (the separate counting pass only).
+  bool count_syscalls = false;
 };
 
 /// A client's outcome: `count` round-trip times in nanoseconds (rtt,
@@ -86,6 +97,9 @@ struct client_result {
   uint64_t stalls = 0;
   double client_allocs = -1;
   double server_allocs = -1;
+  /// rtt, inprocess, router: each process's counts over the timed part
+  /// (probes.hpp), totals over the `count` measured round trips.
+  case_counts counts;
 };
 
 // -- the oneway protocol -------------------------------------------------------------
@@ -138,8 +152,9 @@ struct oneway_result_msg {
   double allocs = -1;
 };
 
-/// operator-new calls in this process so far (counting is on only in the
-/// oneway mode: `alloc_counting(true)`).
+/// Heap allocations of this process so far, counted while counting is on
+/// (`alloc_counting(true)`; `attach_counter_page` turns it on too). What is
+/// counted: probes.hpp.
 uint64_t alloc_count();
 void alloc_counting(bool on);
 

@@ -191,6 +191,8 @@ client_result udp_client(const endpoint_params& p) {
   std::vector<uint8_t> out(p.size), in(p.size + 64);
   res.rtt_ns.reserve(p.count);
   for (uint32_t i = 0; i < p.warmup + p.count; ++i) {
+    if (i == p.warmup)
+      timed_part_begins();
     fill_payload(out, i);
     auto t0 = now_ns();
     if (::send(fd, out.data(), out.size(), 0) != static_cast<ssize_t>(out.size())) {
@@ -214,6 +216,7 @@ client_result udp_client(const endpoint_params& p) {
     if (p.gap.count() > 0)
       std::this_thread::sleep_for(p.gap);
   }
+  timed_part_ends();
   ::close(fd);
   return res;
 }

@@ -168,6 +168,8 @@ client_result zmq_client(const endpoint_params& p) {
   std::vector<uint8_t> out(p.size), in(p.size + 64);
   res.rtt_ns.reserve(p.count);
   for (uint32_t i = 0; i < p.warmup + p.count; ++i) {
+    if (i == p.warmup)
+      timed_part_begins();
     fill_payload(out, i);
     auto t0 = now_ns();
     if (zmq_send(sock, out.data(), out.size(), 0) < 0) {
@@ -186,6 +188,7 @@ client_result zmq_client(const endpoint_params& p) {
     if (p.gap.count() > 0)
       std::this_thread::sleep_for(p.gap);
   }
+  timed_part_ends();
   zmq_close(sock);
   zmq_ctx_term(ctx);
   return res;
