@@ -1,6 +1,7 @@
 #include "channels/channel.hpp"
 
 #include <algorithm>
+#include <array>
 #include <deque>
 #include <set>
 #include <vector>
@@ -153,16 +154,25 @@ void schedule_flush(channel_impl self) {
   self->delayed_send(self, st.flush_delay, atom::tick_v);
 }
 
-/// Hands backlogged frames to the driver until its queue is full again.
+/// Backlogged frames handed to the driver per link_driver::send_batch call
+/// (a stack array; udp sends them with one sendmmsg).
+constexpr size_t tx_batch = 64;
+
+/// Hands backlogged frames to the driver, tx_batch per call, until its queue
+/// is full again. A frame the driver refuses for good is dropped and counted;
+/// the frames after it go in the next call.
 void flush(channel_impl self) {
   auto& st = self->state;
-  while (auto* f = st.backlog.front()) {
-    auto err = st.driver->send(f->dst, f->bytes.data(), f->bytes.size(),
-                               f->priority);
+  std::array<tx_frame, tx_batch> batch;
+  while (auto n = st.backlog.peek(batch.data(), batch.size())) {
+    caf::error err;
+    auto taken = st.driver->send_batch(batch.data(), n, err);
+    st.backlog.pop(taken);
+    if (taken == n)
+      continue;
     if (is(err, ec::queue_full))
       break;
-    if (err)
-      ++st.stats.tx_dropped;
+    ++st.stats.tx_dropped;
     st.backlog.pop();
   }
   schedule_flush(self);

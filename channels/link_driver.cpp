@@ -30,6 +30,19 @@ caf::error link_driver::start(std::shared_ptr<frame_handler> handler) {
   return start(std::move(handler), shared_io_loop());
 }
 
+size_t link_driver::send_batch(const tx_frame* frames, size_t n,
+                               caf::error& err) {
+  err = caf::error{};
+  for (size_t i = 0; i < n; ++i) {
+    auto& f = frames[i];
+    if (auto e = send(f.dst, f.data, f.size, f.priority)) {
+      err = std::move(e);
+      return i;
+    }
+  }
+  return n;
+}
+
 uint8_t link_driver::lane(link_addr, uint8_t) const {
   return 0;
 }

@@ -29,6 +29,15 @@ class event_loop;
 /// (docs/protocol.md, "Fragment header").
 constexpr uint8_t max_lanes = 16;
 
+/// One frame of a link_driver::send_batch call: what send() takes, as data.
+/// `data` is borrowed for the call only.
+struct tx_frame {
+  link_addr dst = 0;
+  const uint8_t* data = nullptr;
+  size_t size = 0;
+  uint8_t priority = 0;
+};
+
 /// Receives what a driver hears.
 ///
 /// Threading: a driver calls these on the thread of the event loop it was
@@ -100,6 +109,31 @@ public:
   virtual caf::error send(link_addr dst, const uint8_t* data, size_t size,
                           uint8_t priority)
     = 0;
+
+  /// Sends `frames[0 .. n)` in order, each as send() would, and returns how
+  /// many were taken: a prefix of `frames`, which the driver sent (or
+  /// queued) exactly as n send() calls that succeeded would have.
+  ///
+  /// Returns n with `err` cleared when every frame was taken. Otherwise it
+  /// stops at the first frame it did not take, returns that frame's index
+  /// k (< n) and sets `err` to what send() would have returned for it:
+  /// - ec::queue_full: frames[k] and every frame after it were not sent;
+  ///   retry them (from frames[k]) when the driver's queue has room again.
+  /// - any other error (ec::packet_too_large, ec::invalid_parameter,
+  ///   ec::invalid_address, ec::device_failed): frames[k] is refused for
+  ///   good; nothing after it was tried. A caller drops frames[k] and calls
+  ///   again with frames[k + 1 ..].
+  /// So frames before a refused frame leave, the refused one does not, and
+  /// the ones after it wait for the next call: the order on the link is the
+  /// order of `frames` whatever fails.
+  ///
+  /// Thread-safety and blocking as send(): any thread; never blocks longer
+  /// than one system call per (driver-chosen, bounded) chunk of frames on a
+  /// non-blocking descriptor. Counters count each taken frame as send()
+  /// does. Default: one send() per frame, stopping as described above;
+  /// kinds override it when their medium takes several frames per system
+  /// call (udp: one sendmmsg per chunk of unicast frames).
+  virtual size_t send_batch(const tx_frame* frames, size_t n, caf::error& err);
 
   /// The lane (< max_lanes) in which frames sent to `dst` with `priority`
   /// travel: the one receivers see in frame_handler::on_frame_in_lane.

@@ -113,4 +113,35 @@ void tx_backlog::pop() {
   }
 }
 
+size_t tx_backlog::peek(tx_frame* out, size_t max) const noexcept {
+  size_t k = 0;
+  // Takes packet p's remaining frames; false when p has none left (an
+  // opened packet whose frames are still coming: front() stops there too).
+  auto take = [&](const packet& p) {
+    if (p.next >= p.frames.size())
+      return false;
+    for (auto i = p.next; i < p.frames.size() && k < max; ++i) {
+      auto& f = p.frames[i];
+      out[k++] = tx_frame{f.dst, f.bytes.data(), f.bytes.size(), f.priority};
+    }
+    return true;
+  };
+  // The started packet first, then by class, FIFO within a class: what
+  // current() picks after each packet is done.
+  if (started_ < classes && !take(queues_[started_].front()))
+    return k;
+  for (size_t c = 0; c < classes; ++c) {
+    auto& q = queues_[c];
+    for (size_t i = c == started_ ? 1 : 0; i < q.size() && k < max; ++i)
+      if (!take(q[i]))
+        return k;
+  }
+  return k;
+}
+
+void tx_backlog::pop(size_t n) {
+  for (size_t i = 0; i < n; ++i)
+    pop();
+}
+
 } // namespace herm

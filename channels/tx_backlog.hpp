@@ -24,6 +24,7 @@
 #include <deque>
 #include <vector>
 
+#include "channels/link_driver.hpp"
 #include "channels/messages.hpp"
 
 namespace herm {
@@ -102,6 +103,16 @@ public:
 
   /// The driver took front().
   void pop();
+
+  /// Writes the next frames for the driver, at most `max`, into `out` in
+  /// the order front() and pop() would hand them out, and returns how many
+  /// (0 when empty). The frames point into the backlog: valid until the
+  /// next call of a non-const member. O(returned + classes + packets
+  /// passed over), no allocation.
+  size_t peek(tx_frame* out, size_t max) const noexcept;
+
+  /// The driver took the first `n` frames peek() returned: pop() `n` times.
+  void pop(size_t n);
 
   const counters& stats() const noexcept {
     return stats_;

@@ -16,9 +16,10 @@
 // thread: it unwatches the socket on the loop thread (run_sync), closes it
 // and drops the handler; no handler call follows its return. Called from a
 // handler (on the loop thread, run_sync runs inline) it ends delivery at
-// once: the callback sees watch_.stopping() and touches nothing more. send() may be
-// called from any thread; it holds a shared lock so that stop() cannot close
-// the socket under it. Datagrams from our own port and one of this host's
+// once: the callback sees watch_.stopping() and touches nothing more. send() and
+// send_batch() may be called from any thread; they hold a shared lock so that
+// stop() cannot close the socket under them. send_batch() hands runs of
+// unicast frames to the kernel with one sendmmsg per 64 frames. Datagrams from our own port and one of this host's
 // (namespace's) IPv4 addresses, snapshotted by getifaddrs in start(), are
 // our own broadcasts looped back by the kernel and are ignored. Datagrams
 // the kernel dropped because the receive buffer was full are counted through
@@ -32,6 +33,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
 #include <climits>
@@ -62,6 +64,10 @@ constexpr uint32_t default_udp_mtu = 1500 - 20 - 8;
 
 /// Datagrams read per readiness callback (one recvmmsg call) at most.
 constexpr size_t max_batch = 32;
+
+/// Frames per sendmmsg call in send_batch at most (stack arrays of this
+/// size; the kernel takes up to UIO_MAXIOV = 1024).
+constexpr size_t max_send_batch = 64;
 
 /// recvmmsg calls per callback that fail with a transient error (ICMP
 /// unreachable reported on the socket, a signal) before it returns anyway.
@@ -138,33 +144,72 @@ public:
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
                   uint8_t) override {
-    if (size > cfg_.profile.mtu)
-      return fail(ec::packet_too_large,
-                  "frame of " + std::to_string(size)
-                    + " bytes exceeds the MTU of "
-                    + std::to_string(cfg_.profile.mtu) + " bytes");
-    if (size == 0)
-      return fail(ec::invalid_parameter,
-                  "refusing to send an empty frame (receivers drop it)");
+    if (auto err = check_frame(dst, size))
+      return err;
     std::shared_lock<std::shared_mutex> guard{fd_mtx_};
     if (fd_ < 0)
       return fail(ec::device_failed, "device is stopped");
-    if (dst != broadcast_addr) {
-      if (dst > udp::max_addr || udp::port_of(dst) == 0)
-        return fail(ec::invalid_address,
-                    "not a udp destination: " + udp::format_addr(dst));
+    if (dst != broadcast_addr)
       return send_to(dst, data, size);
+    return send_to_all(data, size);
+  }
+
+  /// Runs of unicast frames leave with one sendmmsg per max_send_batch
+  /// frames; a broadcast frame costs one sendto per target, as in send().
+  /// A short sendmmsg (the socket's queue filled up) is followed by another
+  /// one from the first frame not sent, which then reports queue_full (or
+  /// is sent, if the queue drained meanwhile).
+  size_t send_batch(const tx_frame* frames, size_t n,
+                    caf::error& err) override {
+    err = caf::error{};
+    std::shared_lock<std::shared_mutex> guard{fd_mtx_};
+    size_t done = 0;
+    while (done < n) {
+      auto& first = frames[done];
+      if (auto e = check_frame(first.dst, first.size)) {
+        err = std::move(e);
+        return done;
+      }
+      if (fd_ < 0) {
+        err = fail(ec::device_failed, "device is stopped");
+        return done;
+      }
+      if (first.dst == broadcast_addr) {
+        if (auto e = send_to_all(first.data, first.size)) {
+          err = std::move(e);
+          return done;
+        }
+        ++done;
+        continue;
+      }
+      // The run: valid unicast frames from `done` on, at most one chunk.
+      std::array<mmsghdr, max_send_batch> msgs{};
+      std::array<iovec, max_send_batch> iovs{};
+      std::array<sockaddr_in, max_send_batch> names{};
+      size_t run = 0;
+      while (run < max_send_batch && done + run < n) {
+        auto& f = frames[done + run];
+        if (f.dst == broadcast_addr || check_frame(f.dst, f.size))
+          break;
+        names[run] = udp::to_sockaddr(f.dst);
+        iovs[run].iov_base = const_cast<uint8_t*>(f.data);
+        iovs[run].iov_len = f.size;
+        auto& hdr = msgs[run].msg_hdr;
+        hdr.msg_name = &names[run];
+        hdr.msg_namelen = sizeof(sockaddr_in);
+        hdr.msg_iov = &iovs[run];
+        hdr.msg_iovlen = 1;
+        ++run;
+      }
+      auto sent = ::sendmmsg(fd_, msgs.data(), static_cast<unsigned>(run),
+                             MSG_DONTWAIT | MSG_NOSIGNAL);
+      if (sent < 0) {
+        err = send_error(errno, first.dst);
+        return done;
+      }
+      done += static_cast<size_t>(sent);
     }
-    // Every target gets its copy even when one fails; the first error wins.
-    caf::error first;
-    if (cfg_.broadcast)
-      first = send_to(*cfg_.broadcast, data, size);
-    for (auto peer : cfg_.peers) {
-      auto err = send_to(peer, data, size);
-      if (err && !first)
-        first = std::move(err);
-    }
-    return first;
+    return done;
   }
 
   const link_profile& profile() const override {
@@ -236,14 +281,26 @@ private:
     }
   }
 
-  // Called with fd_mtx_ held (shared).
-  caf::error send_to(link_addr dst, const uint8_t* data, size_t size) {
-    auto sa = udp::to_sockaddr(dst);
-    auto res = ::sendto(fd_, data, size, MSG_DONTWAIT | MSG_NOSIGNAL,
-                        reinterpret_cast<const sockaddr*>(&sa), sizeof(sa));
-    if (res >= 0)
-      return caf::none;
-    auto err = errno;
+  /// What send() refuses before touching the socket: oversized or empty
+  /// frames, destinations outside the udp address space.
+  caf::error check_frame(link_addr dst, size_t size) const {
+    if (size > cfg_.profile.mtu)
+      return fail(ec::packet_too_large,
+                  "frame of " + std::to_string(size)
+                    + " bytes exceeds the MTU of "
+                    + std::to_string(cfg_.profile.mtu) + " bytes");
+    if (size == 0)
+      return fail(ec::invalid_parameter,
+                  "refusing to send an empty frame (receivers drop it)");
+    if (dst != broadcast_addr
+        && (dst > udp::max_addr || udp::port_of(dst) == 0))
+      return fail(ec::invalid_address,
+                  "not a udp destination: " + udp::format_addr(dst));
+    return caf::none;
+  }
+
+  /// The error for errno `err` of a send to `dst`.
+  caf::error send_error(int err, link_addr dst) const {
     auto where = " to " + udp::format_addr(dst) + ": " + errno_text(err);
     switch (err) {
       case EAGAIN:
@@ -255,8 +312,32 @@ private:
       case EMSGSIZE:
         return fail(ec::packet_too_large, "datagram too large" + where);
       default:
-        return fail(ec::device_failed, "sendto failed" + where);
+        return fail(ec::device_failed, "send failed" + where);
     }
+  }
+
+  // Called with fd_mtx_ held (shared).
+  caf::error send_to(link_addr dst, const uint8_t* data, size_t size) {
+    auto sa = udp::to_sockaddr(dst);
+    auto res = ::sendto(fd_, data, size, MSG_DONTWAIT | MSG_NOSIGNAL,
+                        reinterpret_cast<const sockaddr*>(&sa), sizeof(sa));
+    if (res >= 0)
+      return caf::none;
+    return send_error(errno, dst);
+  }
+
+  /// The broadcast fan-out: every target gets its copy even when one
+  /// fails; the first error wins. Called with fd_mtx_ held (shared).
+  caf::error send_to_all(const uint8_t* data, size_t size) {
+    caf::error first;
+    if (cfg_.broadcast)
+      first = send_to(*cfg_.broadcast, data, size);
+    for (auto peer : cfg_.peers) {
+      auto err = send_to(peer, data, size);
+      if (err && !first)
+        first = std::move(err);
+    }
+    return first;
   }
 
   /// Snapshots this host's (network namespace's) IPv4 addresses, so that our

@@ -20,6 +20,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstring>
 #include <map>
@@ -575,6 +576,35 @@ TYPED_TEST(driver_conformance, refuses_a_frame_above_the_mtu_naming_both_sizes) 
   // Nothing of the refused frames went out.
   ASSERT_TRUE(this->sync(0, 1));
   EXPECT_EQ(this->st(1).rec->frames().size(), 1u);
+}
+
+TYPED_TEST(driver_conformance, send_batch_sends_in_order_and_stops_at_a_refused_frame) {
+  this->start_all();
+  auto& d = *this->st(0).driver;
+  auto mtu = d.profile().mtu;
+  std::vector<byte_buffer> good;
+  for (uint8_t i = 0; i < 5; ++i) {
+    good.push_back(pattern(std::min<size_t>(mtu, 1 + i), i));
+    good.back()[0] = i;
+  }
+  auto too_large = pattern(mtu + 1, 9);
+  auto to = this->dest(1);
+  auto frame = [](link_addr dst, const byte_buffer& b) {
+    return tx_frame{dst, b.data(), b.size(), prio_normal};
+  };
+  std::vector<tx_frame> batch{frame(to, good[0]), frame(broadcast_addr, good[1]),
+                              frame(to, good[2]), frame(to, too_large),
+                              frame(to, good[3]), frame(to, good[4])};
+  caf::error err;
+  // The frames before the refused one leave, it does not, the rest wait.
+  EXPECT_EQ(d.send_batch(batch.data(), batch.size(), err), 3u);
+  this->expect_error(err, ec::packet_too_large, 0);
+  EXPECT_EQ(d.send_batch(batch.data() + 4, 2, err), 2u);
+  EXPECT_FALSE(err) << render(err);
+  ASSERT_TRUE(this->st(1).rec->wait_frames(good.size()));
+  EXPECT_EQ(this->st(1).rec->payloads(), good);
+  EXPECT_EQ(d.send_batch(batch.data(), 0, err), 0u);
+  EXPECT_FALSE(err) << render(err);
 }
 
 // -- addressing ----------------------------------------------------------------------

@@ -155,3 +155,73 @@ TEST(tx_backlog, accounts_bytes_and_peak) {
   EXPECT_EQ(b.bytes(), 0u);
   EXPECT_EQ(b.stats().peak_bytes, full);
 }
+
+// -- peek: the batch the channel hands to link_driver::send_batch -------------
+
+namespace {
+
+/// The tags of what peek() returns with room for `max` frames.
+std::string peek_tags(const tx_backlog& b, size_t max) {
+  std::vector<tx_frame> out(max);
+  auto n = b.peek(out.data(), out.size());
+  EXPECT_LE(n, max);
+  std::string tags;
+  for (size_t i = 0; i < n; ++i)
+    tags += static_cast<char>(out[i].data[0]);
+  return tags;
+}
+
+} // namespace
+
+TEST(tx_backlog, peek_lists_frames_in_the_order_front_and_pop_hand_them_out) {
+  tx_backlog b{1 << 20};
+  queue(b, prio_bulk, 'a', 3);
+  EXPECT_EQ(drain(b, 1), "a"); // 'a' has started
+  queue(b, prio_normal, 'n', 2);
+  queue(b, prio_control, 'c', 1);
+  queue(b, prio_bulk, 'b', 1);
+  queue(b, prio_control, 'd', 2);
+  queue(b, prio_high, 'h', 1);
+  auto copy = b;
+  auto want = drain(copy);
+  EXPECT_EQ(want, "aacddhnnb");
+  EXPECT_EQ(peek_tags(b, 64), want);
+  // peek changes nothing.
+  EXPECT_EQ(drain(b), want);
+}
+
+TEST(tx_backlog, peek_keeps_each_frames_destination_size_and_priority) {
+  tx_backlog b{1 << 20};
+  queue(b, 7, 'x', 2, 5);
+  std::vector<tx_frame> out(4);
+  ASSERT_EQ(b.peek(out.data(), out.size()), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(out[i].dst, 0x10u + 'x');
+    EXPECT_EQ(out[i].size, 5u);
+    EXPECT_EQ(out[i].priority, 7u);
+    EXPECT_EQ(out[i].data[1], i);
+  }
+}
+
+TEST(tx_backlog, peek_is_bounded_and_pop_n_takes_what_it_listed) {
+  tx_backlog b{1 << 20};
+  EXPECT_EQ(peek_tags(b, 8), "");
+  queue(b, prio_normal, 'a', 2);
+  queue(b, prio_normal, 'b', 2);
+  queue(b, prio_control, 'c', 1);
+  EXPECT_EQ(peek_tags(b, 3), "caa");
+  b.pop(3);
+  EXPECT_EQ(peek_tags(b, 3), "bb");
+  b.pop(2);
+  EXPECT_TRUE(b.empty());
+  EXPECT_EQ(b.bytes(), 0u);
+  EXPECT_EQ(peek_tags(b, 3), "");
+}
+
+TEST(tx_backlog, peek_stops_at_an_opened_packet_whose_frames_are_still_coming) {
+  tx_backlog b{1 << 20};
+  b.open(prio_control, false); // no frame appended yet
+  queue(b, prio_normal, 'n', 1);
+  EXPECT_EQ(b.front(), nullptr);
+  EXPECT_EQ(peek_tags(b, 8), "");
+}
