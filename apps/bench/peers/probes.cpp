@@ -399,6 +399,7 @@ void set_case_processes(pid_t server, pid_t router, bool count_syscalls) {
 }
 
 void timed_part_begins() {
+  before = after = snapshot{};
   if (pids[slot_client] == 0)
     pids[slot_client] = ::getpid();
   if (syscalls_wanted) {
