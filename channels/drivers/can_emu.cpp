@@ -171,54 +171,21 @@ public:
 
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      if (!handler)
-        return fail(ec::invalid_parameter, "start needs a frame handler");
-      if (stopped_ || station_.stopping())
-        return fail(ec::device_unavailable, "already stopped");
-      if (started_)
-        return fail(ec::device_unavailable, "already started");
-      started_ = true;
-      handler_ = std::move(handler);
-      loop_ = &loop;
-    }
-    // Not under life_mtx_: run_sync waits for the loop thread, whose
-    // handlers may call stop().
-    if (auto err = station_.start_receiving(loop,
-                                            wire::header_size + CANFD_MTU)) {
-      std::lock_guard<std::mutex> guard{life_mtx_};
-      handler_.reset();
-      started_ = false;
-      return err;
-    }
-    return caf::none;
+    return life_.start(station_, std::move(handler), loop,
+                       wire::header_size + CANFD_MTU);
   }
 
   void stop() override {
-    gate_.close();
-    // Ends delivery first (waits for a callback in progress on another
-    // thread), outside life_mtx_ for the same reason as in start.
-    station_.stop_receiving();
-    std::lock_guard<std::mutex> guard{life_mtx_};
-    if (stopped_)
-      return;
-    stopped_ = true;
-    if (tx_thread_.joinable())
-      tx_thread_.join();
-    if (station_.state() != nullptr) {
-      auto& me = bus().slots[cfg_.node];
-      me.pending.store(0);
-      me.heartbeat.store(0);
-    }
-    station_.leave();
-    // From a handler the handler is still running: the loop drops it
-    // after the callback returns.
-    if (loop_ != nullptr && loop_->in_loop_thread() && handler_)
-      loop_->post([h = std::move(handler_)] {});
-    handler_.reset();
+    life_.stop(station_, gate_, [this] {
+      if (tx_thread_.joinable())
+        tx_thread_.join();
+      if (station_.state() != nullptr) {
+        auto& me = bus().slots[cfg_.node];
+        me.pending.store(0);
+        me.heartbeat.store(0);
+      }
+    });
   }
-
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
                   uint8_t priority) override {
@@ -492,7 +459,7 @@ private:
     wire::header hdr;
     auto st = wire::check(data, size, now, hdr);
     if (st != wire::status::ok) {
-      malformed(*handler_, 0,
+      malformed(*life_.handler(), 0,
                 std::string{"emulated bus: "} + wire::to_string(st) + " ("
                   + std::to_string(size) + "-byte datagram)");
       return false;
@@ -508,18 +475,19 @@ private:
       canfd_frame err{};
       err.can_id = CAN_ERR_FLAG | CAN_ERR_PROT;
       err.len = CAN_ERR_DLC;
-      error_frame(*handler_, err);
+      error_frame(*life_.handler(), err);
       return;
     }
     canfd_frame frame;
     auto nbytes = size - wire::header_size; // CAN_MTU or CANFD_MTU (checked)
     std::memset(&frame, 0, sizeof(frame));
     std::memcpy(&frame, data + wire::header_size, nbytes);
-    dispatch(*handler_, frame, nbytes);
+    // The copy keeps the handler alive should it stop the driver.
+    dispatch(*life_.handler(), frame, nbytes);
   }
 
   void fail(caf::error err) override {
-    handler_->on_failure(std::move(err));
+    life_.handler()->on_failure(std::move(err));
   }
 
   using can_driver::fail;
@@ -531,13 +499,7 @@ private:
   std::atomic<double> loss_;
   std::atomic<double> error_rate_;
 
-  // Lifecycle, guarded by life_mtx_. handler_ is read by the loop
-  // callbacks between start and stop.
-  std::mutex life_mtx_;
-  bool started_ = false;
-  bool stopped_ = false; // transmit thread joined, bus left
-  event_loop* loop_ = nullptr;
-  std::shared_ptr<frame_handler> handler_;
+  emu_medium::station_life life_;
   std::thread tx_thread_;
 
   // Transmit queue (a heap, see `later`) and our slot, guarded by

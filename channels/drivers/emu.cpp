@@ -222,48 +222,15 @@ public:
 
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    {
-      std::lock_guard<std::mutex> guard{lifecycle_mtx_};
-      if (handler == nullptr)
-        return make_error(ec::invalid_parameter,
-                          prefix_ + "start without handler");
-      if (stopped_ || station_.stopping())
-        return make_error(ec::device_failed, prefix_ + "start after stop");
-      if (started_)
-        return make_error(ec::already_exists, prefix_ + "already started");
-      started_ = true;
-      handler_ = std::move(handler);
-      loop_ = &loop;
-    }
-    // Not under lifecycle_mtx_: run_sync waits for the loop thread, whose
-    // handlers may call stop().
-    if (auto err = station_.start_receiving(
-          loop, emu::wire_header_size + cfg_.profile.mtu)) {
-      std::lock_guard<std::mutex> guard{lifecycle_mtx_};
-      handler_.reset();
-      started_ = false;
-      return err;
-    }
-    return caf::none;
+    return life_.start(station_, std::move(handler), loop,
+                       emu::wire_header_size + cfg_.profile.mtu);
   }
 
   void stop() override {
-    gate_.close();
-    // Ends delivery first (waits for a callback in progress on another
-    // thread), outside lifecycle_mtx_ for the same reason as in start.
-    station_.stop_receiving();
-    std::lock_guard<std::mutex> guard{lifecycle_mtx_};
-    if (stopped_)
-      return;
-    stopped_ = true;
-    if (tx_thread_.joinable())
-      tx_thread_.join();
-    station_.leave();
-    // From a handler the handler is still running: the loop drops it
-    // after the callback returns.
-    if (loop_ != nullptr && loop_->in_loop_thread() && handler_)
-      loop_->post([h = std::move(handler_)] {});
-    handler_.reset();
+    life_.stop(station_, gate_, [this] {
+      if (tx_thread_.joinable())
+        tx_thread_.join();
+    });
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -546,16 +513,16 @@ private:
       auto why = std::string{"emu: "} + emu::to_string(status) + " ("
                  + std::to_string(size) + "-byte datagram, MTU "
                  + std::to_string(cfg_.profile.mtu) + ")";
-      handler_->on_malformed(src, why.c_str());
+      life_.handler()->on_malformed(src, why.c_str());
       return false;
     }
     if ((hdr.flags & emu::flag_corrupted) != 0 && cfg_.frame_check) {
       // The receiving interface's frame check fails: the frame never
       // reaches software, as on the real medium.
       ++rx_malformed_;
-      handler_->on_malformed(hdr.src,
-                             "emu: frame check failed (a bit was flipped "
-                             "on the medium)");
+      life_.handler()->on_malformed(hdr.src,
+                                    "emu: frame check failed (a bit was "
+                                    "flipped on the medium)");
       return false;
     }
     deliver_at = hdr.deliver_at_ns;
@@ -565,12 +532,13 @@ private:
   void deliver(const uint8_t* data, size_t size) override {
     auto hdr = emu::decode(data);
     ++rx_frames_;
-    handler_->on_frame(hdr.src, data + emu::wire_header_size,
-                       size - emu::wire_header_size);
+    // The copy keeps the handler alive should it stop the driver.
+    life_.handler()->on_frame(hdr.src, data + emu::wire_header_size,
+                              size - emu::wire_header_size);
   }
 
   void fail(caf::error err) override {
-    handler_->on_failure(std::move(err));
+    life_.handler()->on_failure(std::move(err));
   }
 
   // -- state ---------------------------------------------------------------------
@@ -585,13 +553,7 @@ private:
   std::atomic<int64_t> jitter_ns_;
   std::atomic<uint64_t> bandwidth_;
 
-  // Lifecycle, guarded by lifecycle_mtx_. handler_ is read by the loop
-  // callbacks between start and stop.
-  std::mutex lifecycle_mtx_;
-  bool started_ = false;
-  bool stopped_ = false; // transmit thread joined, medium left
-  event_loop* loop_ = nullptr;
-  std::shared_ptr<frame_handler> handler_;
+  emu_medium::station_life life_;
   std::thread tx_thread_;
 
   // Transmit queue, guarded by gate_.mutex().

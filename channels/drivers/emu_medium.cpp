@@ -595,4 +595,47 @@ void station::leave() {
   tx_fd_.reset();
 }
 
+// -- station_life --------------------------------------------------------------
+
+caf::error station_life::start(station& st,
+                               std::shared_ptr<frame_handler> handler,
+                               event_loop& loop, size_t max_datagram) {
+  {
+    std::lock_guard<std::mutex> guard{mtx_};
+    if (!handler)
+      return st.fail(ec::invalid_parameter, "start needs a frame handler");
+    if (stopped_ || st.stopping())
+      return st.fail(ec::device_unavailable, "already stopped");
+    if (started_)
+      return st.fail(ec::device_unavailable, "already started");
+    started_ = true;
+    handler_ = std::move(handler);
+  }
+  // Not under mtx_: run_sync waits for the loop thread, whose handlers may
+  // call stop().
+  if (auto err = st.start_receiving(loop, max_datagram)) {
+    std::lock_guard<std::mutex> guard{mtx_};
+    handler_.reset();
+    started_ = false;
+    return err;
+  }
+  return caf::none;
+}
+
+void station_life::stop(station& st, tx_gate& gate,
+                        const std::function<void()>& teardown) {
+  gate.close();
+  // Ends delivery first (waits for a callback in progress on another
+  // thread), outside mtx_ for the same reason as in start.
+  st.stop_receiving();
+  std::lock_guard<std::mutex> guard{mtx_};
+  if (stopped_)
+    return;
+  stopped_ = true;
+  teardown();
+  st.leave();
+  // From a handler call, the callback that made it holds its own copy.
+  handler_.reset();
+}
+
 } // namespace herm::emu_medium

@@ -39,6 +39,7 @@
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <random>
@@ -57,6 +58,7 @@
 #include "channels/drivers/emu_wire.hpp"
 #include "channels/drivers/posix.hpp"
 #include "channels/error.hpp"
+#include "channels/link_driver.hpp"
 
 namespace herm::emu_medium {
 
@@ -588,6 +590,58 @@ private:
   event_loop::timer_handle hold_timer_;
   int64_t hold_timer_at_ = 0;
   event_loop::timer_handle liveness_timer_;
+};
+
+// -- a driver's life cycle over its station -----------------------------------
+
+/// The start/stop life cycle both emulated drivers (emu, the emulated CAN
+/// bus) share: opened, then started (receiving on the module's event loop),
+/// then stopped for good. It owns the lock, the state and the frame
+/// handler; the driver owns the station, the transmit gate and thread.
+///
+/// Errors agree with the descriptor drivers (loop_watch.hpp): a null handler
+/// is ec::invalid_parameter ("start needs a frame handler"), a second start
+/// ec::device_unavailable ("already started"), a start after stop
+/// ec::device_unavailable ("already stopped"); texts start with the
+/// station's "device 'NAME': ".
+///
+/// The handler and stop from inside a handler call: stop drops the handler
+/// at once, so every client callback that calls the handler holds a copy of
+/// handler() for the duration of the call (as the descriptor drivers'
+/// readiness callbacks do); nothing is posted to the loop, which may be
+/// gone by then.
+///
+/// Threading: start and stop from any thread, stop also from a handler
+/// call; neither holds the lock while station::start_receiving or
+/// stop_receiving wait for the loop thread (whose handlers may call stop).
+class station_life {
+public:
+  /// Refuses as above, then keeps `handler` and starts receiving on `loop`
+  /// datagrams of up to `max_datagram` bytes. If start_receiving fails its
+  /// error is returned and the handler dropped.
+  caf::error start(station& st, std::shared_ptr<frame_handler> handler,
+                   event_loop& loop, size_t max_datagram);
+
+  /// Idempotent. Closes `gate` (no frame is taken any more, the transmit
+  /// thread ends), ends delivery (station::stop_receiving), then, the first
+  /// time only and under the lock: `teardown` (join the transmit thread,
+  /// clear what the station published), station::leave, and drops the
+  /// handler. No handler call starts after it returns.
+  void stop(station& st, tx_gate& gate, const std::function<void()>& teardown);
+
+  /// The handler while started; null before and after. Loop thread (client
+  /// callbacks): keep the copy while calling it.
+  std::shared_ptr<frame_handler> handler() const {
+    return handler_;
+  }
+
+private:
+  std::mutex mtx_;
+  bool started_ = false;
+  bool stopped_ = false;
+  /// Written under mtx_ before receiving starts and after it ended; read
+  /// by the loop thread in between only.
+  std::shared_ptr<frame_handler> handler_;
 };
 
 } // namespace herm::emu_medium

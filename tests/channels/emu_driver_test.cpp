@@ -437,7 +437,11 @@ TEST_F(emu_driver_test, stop_is_idempotent_and_removes_only_the_socket_file) {
   EXPECT_FALSE(exists(sock_path(4)));
   EXPECT_TRUE(exists(medium_ + "/medium"));
   EXPECT_TRUE(a.rec->failures().empty());
-  EXPECT_TRUE(is(a.driver->start(a.rec), ec::device_failed));
+  auto again = a.driver->start(a.rec);
+  EXPECT_TRUE(is(again, ec::device_unavailable)) << render(again);
+  EXPECT_NE(render(again).find("device 'fw0': already stopped"),
+            std::string::npos)
+    << render(again);
 }
 
 TEST_F(emu_driver_test, stale_socket_file_of_a_dead_station_is_taken_over) {
