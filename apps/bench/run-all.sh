@@ -122,6 +122,10 @@ if [ $quick = 1 ]; then
 else
   min_time=0.2; sizes=10,30,100,300,1000; rtt_args=(--repeat "$repeat"); fp_args=(--runs "$repeat")
 fi
+# Round trips in both placements (every process on vCPU 0; server and router
+# on vCPU 0, client on vCPU 1), each transport in each, with wake-ups,
+# syscalls (a separate perf counting pass) and allocations per round trip.
+rtt_args+=(--placements one-cpu,per-cpu)
 run can can_efficiency.json "$bin/bench_can_efficiency" "${gbench[@]}" \
   --benchmark_out="$out/can_efficiency.json"
 run serial serial_goodput.json "$bin/bench_serial_goodput" "${gbench[@]}" \

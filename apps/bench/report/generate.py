@@ -396,27 +396,37 @@ class Report:
                 self.out(f"**{title}** (`{mode}`): not in this run.", "")
                 continue
             sizes = sorted({c["size"] for c in mc})
-            self.out(f"**{title}** (`{mode}`; ratio to {ref}):", "",
-                     "| transport | " + " | ".join(f"{s:,} B" for s in sizes)
-                     + " |", "|---" * (len(sizes) + 1) + "|")
-            for t in unique(c["transport"] for c in mc):
-                cells = []
-                label = transport_label(next(c for c in mc
-                                             if c["transport"] == t))
-                for s in sizes:
-                    c = find(mc, transport=t, size=s)
-                    cells.append(rtt_cell(c, ratio_key))
-                    if c and c.get("runs") and c.get("p50_us") is not None:
-                        rtt_plot.append((mode, label, s, c["p50_us"],
-                                         c.get("p50_min_us", c["p50_us"]),
-                                         c.get("p50_max_us", c["p50_us"])))
-                bold = "**" if t.startswith("herm") else ""
-                self.out(f"| {bold}{label}{bold} | " + " | ".join(cells) + " |")
+            places = placements_of(mc)
+            self.out(f"**{title}** (`{mode}`; ratio to {ref} in the same "
+                     "placement):", "",
+                     "| transport | placement | "
+                     + " | ".join(f"{s:,} B" for s in sizes)
+                     + " |", "|---" * (len(sizes) + 2) + "|")
+            for pl in places:
+                pc = [c for c in mc if c.get("placement") == pl]
+                for t in unique(c["transport"] for c in pc):
+                    cells = []
+                    label = transport_label(next(c for c in pc
+                                                 if c["transport"] == t))
+                    for s in sizes:
+                        c = find(pc, transport=t, size=s)
+                        cells.append(rtt_cell(c, ratio_key))
+                        if c and c.get("runs") and c.get("p50_us") is not None:
+                            rtt_plot.append((mode, placed(label, pl, places), s,
+                                             c["p50_us"],
+                                             c.get("p50_min_us", c["p50_us"]),
+                                             c.get("p50_max_us", c["p50_us"])))
+                    bold = "**" if t.startswith("herm") else ""
+                    self.out(f"| {bold}{label}{bold} | {pl or '—'} | "
+                             + " | ".join(cells) + " |")
             self.out("")
-            if mode in ("back-to-back", "gap-10ms"):
-                self.rtt_targets(mode, mc)
-            elif mode == "inprocess":
-                self.inprocess_targets(mc)
+            self.rtt_counts(mode, mc, places)
+            for pl in places:
+                pc = [c for c in mc if c.get("placement") == pl]
+                if mode in ("back-to-back", "gap-10ms"):
+                    self.rtt_targets(mode, pc, pl)
+                elif mode == "inprocess":
+                    self.inprocess_targets(pc)
         self.plots["rtt"] = rtt_plot
         self.oneway(cases)
         unknown = sorted(m for m in present
@@ -424,10 +434,45 @@ class Report:
         if unknown:
             self.out(f"Modes not shown: {', '.join(unknown)}.", "")
 
-    def rtt_targets(self, mode, mc):
+    def rtt_counts(self, mode, mc, places):
+        """Per round trip and process: wake-ups, syscalls, allocations, and
+        the targets of issue 16 for HERM's default policy."""
+        counted = [c for c in mc if c.get("per_round_trip")]
+        if not counted:
+            return
+        self.out(f"Per round trip (`{mode}`), each process as client/server"
+                 "[/router]: thread wake-ups (schedstat), syscalls (separate "
+                 "counting pass), allocations.", "",
+                 "| transport | placement | size | wake-ups | syscalls | allocations |",
+                 "|---|---|---|---|---|---|")
+        for c in counted:
+            prt = c["per_round_trip"]
+            self.out(f"| {transport_label(c)} | {c.get('placement') or '—'} | "
+                     f"{c['size']:,} B | {per_process(prt, 'wakeups')} | "
+                     f"{per_process(prt, 'syscalls', c.get('syscalls_per_round_trip'))} | "
+                     f"{per_process(prt, 'allocs', c.get('allocs_per_round_trip'))} |")
+        self.out("")
+        for pl in places:
+            for c in default_herm([c for c in counted if c.get("placement") == pl]):
+                where = f"{mode}, {c['size']:,} B, {pl or 'unpinned'}"
+                for key, what, goal, limit in (
+                        ("wakeups_per_round_trip_most",
+                         "thread wake-ups per module per round trip", "≤ 2", 2),
+                        ("syscalls_per_round_trip", "syscalls per round trip",
+                         "≤ 8", 8),
+                        ("allocs_per_round_trip", "allocations per round trip",
+                         "≤ 12", 12)):
+                    v = c.get(key)
+                    if v is None:
+                        continue
+                    self.target(f"HERM {what}, {where}", num(v), "—", "—",
+                                goal, v <= limit)
+
+    def rtt_targets(self, mode, mc, placement=None):
         herm = default_herm(mc)
         if not herm:
             return
+        mode = f"{mode}, {placement}" if placement else mode
         ratios = [c.get("ratio_to_udp") for c in herm if c.get("runs")]
         ratios = [r for r in ratios if r is not None]
         p50s = [c["p50_us"] for c in herm if c.get("runs")]
@@ -462,11 +507,15 @@ class Report:
                  "| transport | " + " | ".join(f"{s:,} B" for s in sizes) + " |",
                  "|---" * (len(sizes) + 1) + "|")
         plot = []
-        for t in unique(c["transport"] for c in mc):
-            label = transport_label(next(c for c in mc if c["transport"] == t))
+        places = placements_of(mc)
+        for pl, t in [(pl, t) for pl in places for t in unique(
+                c["transport"] for c in mc if c.get("placement") == pl)]:
+            pc = [c for c in mc if c.get("placement") == pl]
+            label = placed(transport_label(next(c for c in pc if c["transport"] == t)),
+                           pl, places)
             cells = []
             for s in sizes:
-                c = find(mc, transport=t, size=s)
+                c = find(pc, transport=t, size=s)
                 if c is None or not c.get("runs") or c.get("msgs_per_s") is None:
                     cells.append(incomplete(c))
                     continue
@@ -490,13 +539,14 @@ class Report:
         herm = [c for c in default_herm(mc) if c.get("transport") == "herm"
                 or c.get("transport", "").startswith("herm/")]
         for c in herm:
-            d = find(mc, family="dds", size=c["size"])
+            d = find(mc, family="dds", size=c["size"], placement=c.get("placement"))
             if not (c.get("runs") and c.get("msgs_per_s") and d
                     and d.get("msgs_per_s")):
                 continue
             r = c["msgs_per_s"] / d["msgs_per_s"]
             self.target(f"HERM one-way throughput above Cyclone DDS, "
-                        f"{c['size']:,} B, policy {c.get('policy') or 'default'}",
+                        f"{c['size']:,} B, policy {c.get('policy') or 'default'}"
+                        + (f", {c['placement']}" if c.get("placement") else ""),
                         f"{c['msgs_per_s']:,.0f} msg/s",
                         f"DDS {d['msgs_per_s']:,.0f} msg/s", f"{r:.2f}×",
                         "> 1×", r > 1)
@@ -654,10 +704,31 @@ def transport_label(c):
     return label
 
 
+def placements_of(cases):
+    """The placements of the cases in run order (None: a run without them)."""
+    return unique(c.get("placement") for c in cases)
+
+
+def placed(label, placement, places):
+    return f"{label}, {placement}" if placement and len(places) > 1 else label
+
+
+def per_process(prt, key, total=None):
+    """"c/s[/r]" of one figure per round trip, with the sum when given."""
+    vals = []
+    for proc in ("client", "server", "router"):
+        if proc in prt:
+            v = prt[proc].get(key)
+            vals.append("—" if v is None else num(v))
+    cell = "/".join(vals) if vals else "—"
+    return cell + (f" (Σ {num(total)})" if total is not None else "")
+
+
 def default_herm(mc):
-    """HERM's cases with hermd's default policy (one sharing worker)."""
+    """HERM's cases with hermd's default policy (the loop scheduler; runs
+    from before it: one sharing worker)."""
     herm = [c for c in mc if c.get("family") == "herm"]
-    for policy in ("sharing:1", "sharing", ""):
+    for policy in ("loop", "sharing:1", "sharing", ""):
         chosen = [c for c in herm if c.get("policy", "") == policy]
         if chosen:
             return chosen

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """CTest bench.report_generator_writes_tables_from_the_fixture: runs
 generate.py on the checked-in fixture (fixture/: a run with CAN, serial,
-routing, round trips with some modes missing, and the footprint; no emulated
+routing, round trips with some modes missing (back to back in two
+placements, with counts per round trip), and the footprint; no emulated
 media, no fragmentation) and checks the markdown it writes into a copy of a
 document with the markers. Never about real figures: the fixture's are made
 up. Exit 0 when every check passes, 1 otherwise (each failure printed)."""
@@ -96,8 +97,28 @@ def main():
             check(lines_with(text, f"(`{mode}`): not in this run."),
                   f"round-trip mode {mode} listed as not run")
         check("0.16× UDP, 0.41× DDS" in text, "oneway mode with both ratios")
-        check(lines_with(text, "| ZeroMQ | failed: server did not start |"),
+        check(lines_with(text, "| ZeroMQ | one-cpu | failed: server did not start |"),
               "an incomplete transport shows its error")
+
+        # Placements: every figure names its placement, ratios and targets
+        # are taken within it, and the counts per round trip are shown.
+        check(lines_with(text, "| **HERM, sharing:1** | per-cpu | 71.0, 2.26× |"),
+              "a per-cpu row with its ratio to UDP in the same placement")
+        check(lines_with(text, "HERM round trip below Cyclone DDS, back-to-back, "
+                         "per-cpu", "DDS 48.8 µs", "1.45×", "**missed**"),
+              "the DDS target per placement")
+        check(lines_with(text, "| HERM, sharing:1 | one-cpu | 16 B | 3.50/3.00 | "
+                         "9.00/8.00 (Σ 17.0) | 22.0/21.0 (Σ 43.0) |"),
+              "counts per round trip and process")
+        check(lines_with(text, "HERM thread wake-ups per module per round trip, "
+                         "back-to-back, 16 B, one-cpu", "3.50", "≤ 2", "**missed**"),
+              "wake-up target missed in one placement")
+        check(lines_with(text, "HERM allocations per round trip, back-to-back, "
+                         "16 B, per-cpu", "11.0", "≤ 12", "**met**"),
+              "allocation target met in the other")
+        check(lines_with(text, "HERM syscalls per round trip, back-to-back, 16 B, "
+                         "per-cpu", "6.00", "≤ 8", "**met**"),
+              "syscall target")
         for f in ("emu_bandwidth.json", "fragmentation.json"):
             check(f"Not in this run (no `{f}`" in text,
                   f"missing {f} listed as not run")
