@@ -74,9 +74,43 @@ using asl_impl = app_support_actor::stateful_pointer<asl_state>;
 
 // -- small helpers -----------------------------------------------------------------
 
+/// Puts `msg` for `dst` straight on the next hop's channel when the
+/// routing agent published one (routing/fast_routes.hpp): header and
+/// message encoded into one buffer. False: it must go through the agent.
+bool send_fast(asl_impl self, module_id dst, const asl_message& msg,
+               bool sign) {
+  auto& cell = self->state.cfg.fast_routes;
+  if (!cell || sign || !is_unicast(dst))
+    return false;
+  auto snap = cell->get();
+  if (!snap || dst == snap->self)
+    return false;
+  data_header h;
+  h.src = snap->self;
+  h.dst = dst;
+  h.priority = prio_normal;
+  h.protocol = asl_protocol;
+  byte_buffer bytes(header_size(h));
+  encode(msg, bytes);
+  h.size_class = size_class_of(bytes.size() - header_size(h));
+  auto* hop = snap->lookup(dst, h.size_class);
+  if (hop == nullptr)
+    return false;
+  auto& hdr = self->state.buf;
+  hdr.clear();
+  encode(h, hdr);
+  std::copy(hdr.begin(), hdr.end(), bytes.begin());
+  cell->count_sent();
+  self->send(hop->channel,
+             write_packet{hop->neighbour, h.priority, std::move(bytes)});
+  return true;
+}
+
 void send_now(asl_impl self, module_id dst, const asl_message& msg,
               bool sign) {
   auto& st = self->state;
+  if (send_fast(self, dst, msg, sign))
+    return;
   st.buf.clear();
   encode(msg, st.buf);
   self->send(st.agent,

@@ -14,6 +14,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -282,6 +283,11 @@ using app_support_actor = caf::typed_actor<
 
 /// Timers and bounds of one application support actor.
 struct app_support_config {
+  /// The routing agent's published next hops (routing/fast_routes.hpp),
+  /// the same cell as routing_config::fast_routes: a unicast packet to a
+  /// destination it holds goes straight to the channel. Null: every packet
+  /// goes through the agent. start_module sets both.
+  std::shared_ptr<route_cell> fast_routes;
   /// Housekeeping period: request deadlines, leases, rebinding.
   std::chrono::milliseconds tick{100};
   /// A request still unanswered after this fails with ec::timeout (the

@@ -172,7 +172,9 @@ json to_json(const routing_stats& s) {
           {"seqno_requests_over_limit", s.seqno_requests_over_limit},
           {"floods_evicted", s.floods_evicted},
           {"flood_ids_evicted", s.flood_ids_evicted},
-          {"sources_evicted", s.sources_evicted}};
+          {"sources_evicted", s.sources_evicted},
+          {"fast_sent", s.fast_sent},
+          {"fast_routes_refused", s.fast_routes_refused}};
 }
 
 json to_json(const app_support_stats& s) {

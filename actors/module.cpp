@@ -93,8 +93,15 @@ caf::expected<module_handles> start_module(caf::actor_system& sys,
     }
   }
   // The agent subscribes to the IO manager and learns the open channels.
-  m.agent = spawn_routing_agent(sys, m.io, cfg.routing);
-  m.apps = spawn_app_support(sys, m.agent, cfg.apps);
+  // The agent publishes its established routes, application support
+  // sends on them (routing/fast_routes.hpp).
+  auto routing = cfg.routing;
+  auto apps = cfg.apps;
+  if (!routing.fast_routes)
+    routing.fast_routes = std::make_shared<route_cell>();
+  apps.fast_routes = routing.fast_routes;
+  m.agent = spawn_routing_agent(sys, m.io, std::move(routing));
+  m.apps = spawn_app_support(sys, m.agent, std::move(apps));
   m.supervisor = sys.spawn(supervisor, cfg.on_failure);
   watch_module_actor(m, caf::actor_cast<caf::actor>(m.io), "herm.io");
   watch_module_actor(m, caf::actor_cast<caf::actor>(m.agent), "herm.routing");

@@ -187,6 +187,10 @@ routing_stats stats_now(agent_impl self) {
                           + evicted(packet_type::conflict)
                           + evicted(packet_type::seqno_request);
   result.flood_ids_evicted = evicted(packet_type::data);
+  if (auto& cell = st.cfg.fast_routes) {
+    result.fast_sent = cell->sent();
+    result.originated += result.fast_sent;
+  }
   result.sources_evicted = st.table.sources_evicted();
   if (auto other = st.alloc->live_holder(self->clock().now())) {
     result.id_conflict_instance = *other;

@@ -77,6 +77,10 @@ struct agent_state {
   byte_buffer buf;
   /// Signs and verifies packets when the network has a key.
   std::unique_ptr<authenticator> auth;
+  /// Destinations this module originated unicast packets to, whose next
+  /// hops it publishes in cfg.fast_routes (routing/fast_routes.hpp);
+  /// bounded by route_cell::max_destinations().
+  std::set<module_id> fast_dests;
 
   std::chrono::steady_clock::duration hold() const {
     return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
@@ -104,6 +108,12 @@ inline bool decoded(agent_impl self, const caf::expected<T>& x) {
     ++self->state.stats.rx_malformed;
   return static_cast<bool>(x);
 }
+
+/// Publishes the next hops of `fast_dests` in cfg.fast_routes, or
+/// withdraws the snapshot while the fast path is not allowed (no address,
+/// a key, a tracer or observer, leaving). No-op without a cell.
+/// O(|fast_dests| log N). routing_agent.cpp.
+void publish_fast_routes(agent_impl self);
 
 // -- sending (routing_agent.cpp) ------------------------------------------------
 

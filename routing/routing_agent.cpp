@@ -150,6 +150,12 @@ void relay_flood(agent_impl self, T fwd, channel_id in) {
 /// and one route event per destination changed. O(|change| log N).
 void apply_change(agent_impl self, const table_change& change) {
   auto& st = self->state;
+  // The snapshot follows at once: a packet must not leave on a next hop
+  // the table gave up one mailbox turn ago.
+  if (!st.fast_dests.empty()
+      && std::any_of(change.changed.begin(), change.changed.end(),
+                     [&](module_id d) { return st.fast_dests.count(d) > 0; }))
+    publish_fast_routes(self);
   if (!st.route_listeners.empty())
     st.pending_told.insert(change.changed.begin(), change.changed.end());
   st.pending_changed.insert(change.changed.begin(), change.changed.end());
@@ -240,6 +246,7 @@ void act(agent_impl self, address_allocator::actions acts,
     ++st.stats.renumberings;
     st.stats.self = no_module;
     st.stats.assigned = false;
+    publish_fast_routes(self);
   }
   if (acts.assigned) {
     st.table.set_self(st.alloc->id());
@@ -247,6 +254,7 @@ void act(agent_impl self, address_allocator::actions acts,
     st.stats.self = st.alloc->id();
     st.stats.assigned = st.alloc->assigned();
     send_update(self, {st.table.self()});
+    publish_fast_routes(self);
   }
 }
 
@@ -584,6 +592,49 @@ void tick(agent_impl self) {
 
 // -- requests from above --------------------------------------------------------
 
+// -- the data path of established routes ------------------------------------------
+
+} // namespace
+
+void publish_fast_routes(agent_impl self) {
+  auto& st = self->state;
+  auto& cell = st.cfg.fast_routes;
+  if (!cell)
+    return;
+  bool allowed = st.alloc->assigned() && !st.auth && !st.cfg.tracer
+                 && !st.cfg.observer && !st.leaving;
+  if (!allowed || st.fast_dests.empty()) {
+    cell->publish(nullptr);
+    return;
+  }
+  auto snap = std::make_shared<route_snapshot>();
+  snap->self = st.table.self();
+  for (auto dst : st.fast_dests) {
+    auto& hops = snap->routes[dst];
+    for (uint8_t k = 0; k < size_classes; ++k)
+      if (auto nh = st.table.lookup(dst, k))
+        if (auto i = st.channels.find(nh->channel); i != st.channels.end())
+          hops[k] = fast_hop{i->second.handle, nh->neighbour};
+  }
+  cell->publish(std::move(snap));
+}
+
+namespace {
+
+/// Adds `dst`, just sent to through the agent, to the snapshot's
+/// destinations (counted when they are full already).
+void note_fast_destination(agent_impl self, module_id dst) {
+  auto& st = self->state;
+  if (!st.cfg.fast_routes || st.fast_dests.count(dst) > 0)
+    return;
+  if (st.fast_dests.size() >= st.cfg.fast_routes->max_destinations()) {
+    ++st.stats.fast_routes_refused;
+    return;
+  }
+  st.fast_dests.insert(dst);
+  publish_fast_routes(self);
+}
+
 caf::error originate(agent_impl self, send_packet& msg) {
   auto& st = self->state;
   auto self_id = st.table.self();
@@ -627,6 +678,7 @@ caf::error originate(agent_impl self, send_packet& msg) {
   if (st.cfg.observer)
     st.cfg.observer(self_id, h, bytes);
   transmit(self, packet_trace::originated, h, *nh, std::move(bytes), msg.sign);
+  note_fast_destination(self, msg.dst);
   return caf::none;
 }
 
@@ -637,6 +689,7 @@ caf::result<void> leave(agent_impl self) {
   auto& st = self->state;
   send_hellos(self, true);
   st.leaving = true;
+  publish_fast_routes(self);
   auto rp = self->make_response_promise<void>();
   auto deliver = [](caf::typed_response_promise<void>& p) {
     static_cast<caf::response_promise&>(p).deliver(caf::unit);
@@ -705,6 +758,9 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
                                              io_manager_actor io,
                                              routing_config cfg) {
   init(self, io, std::move(cfg));
+  // Nobody may send on a route of an agent that ended.
+  if (auto cell = self->state.cfg.fast_routes)
+    self->attach_functor([cell] { cell->publish(nullptr); });
   self->send(io, atom::subscribe_v, caf::actor_cast<io_listener_actor>(self));
   // Channels tell their subscribers when they end; the IO manager's
   // channel_down carries the same news, and that is what we act on.
@@ -741,6 +797,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       cs.cost = link_metrics(up.info.profile);
       cs.code = link_code_of(up.info.profile.name);
       self->state.channels[up.info.id] = std::move(cs);
+      publish_fast_routes(self);
       self->request(up.handle, caf::infinite, atom::subscribe_v,
                     caf::actor_cast<channel_reader_actor>(self))
         .then([](channel_info&) {}, [](caf::error&) {});
@@ -751,6 +808,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       st.channels.erase(down.id);
       st.neighbours.remove_channel(down.id);
       apply_change(self, st.table.remove_channel(down.id));
+      publish_fast_routes(self);
     },
     [self](packet_received& pkt) { on_packet(self, pkt); },
     [](link_event&) {

@@ -18,6 +18,7 @@
 #include "channels/io_manager.hpp"
 #include "channels/messages.hpp"
 #include "routing/auth.hpp"
+#include "routing/fast_routes.hpp"
 #include "routing/module_id.hpp"
 #include "routing/route_table.hpp"
 #include "routing/wire.hpp"
@@ -232,6 +233,13 @@ struct routing_stats {
   uint64_t id_conflicts = 0;
   uint64_t id_conflict_instance = 0;
   std::string id_conflict_heard;
+  /// The data path of established routes (routing/fast_routes.hpp): data
+  /// packets the module's senders put straight on a channel (counted in
+  /// `originated` too), and destinations left out of the snapshot because
+  /// it held route_cell::max_destinations() already (one per packet sent to
+  /// them through the agent).
+  uint64_t fast_sent = 0;
+  uint64_t fast_routes_refused = 0;
 };
 
 template <class Inspector>
@@ -249,7 +257,8 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.rx_routes_over_limit, x.rx_routes_over_share,
            x.rx_neighbours_over_limit, x.seqno_requests_over_limit,
            x.floods_evicted, x.flood_ids_evicted, x.sources_evicted,
-           x.id_conflicts, x.id_conflict_instance, x.id_conflict_heard);
+           x.id_conflicts, x.id_conflict_instance, x.id_conflict_heard,
+           x.fast_sent, x.fast_routes_refused);
 }
 
 /// Receives this module's data packets of one protocol (the application
@@ -395,6 +404,10 @@ struct routing_config {
   /// comes back after falling silent. Empty: not reported (the counters in
   /// routing_stats still count).
   std::function<void(const id_conflict&)> on_id_conflict;
+  /// Where the agent publishes the next hops of established routes for the
+  /// module's senders (routing/fast_routes.hpp); start_module shares one
+  /// with the application support layer. Null: nothing is published.
+  std::shared_ptr<route_cell> fast_routes;
 };
 
 /// Spawns the agent and subscribes it to `io`'s channels.

@@ -38,7 +38,9 @@ namespace herm::testkit {
 inline void add_app_support(deterministic_system& fx, sim_network& net,
                             app_support_config cfg = {}) {
   net.on_start = [&fx, cfg](size_t, sim_network::module& m) {
-    auto asl = fx.track(spawn_app_support(fx.sys(), m.agent, cfg));
+    auto c = cfg;
+    c.fast_routes = m.cfg.fast_routes; // what the module's agent publishes
+    auto asl = fx.track(spawn_app_support(fx.sys(), m.agent, std::move(c)));
     m.apps = caf::actor_cast<caf::actor>(asl);
   };
 }

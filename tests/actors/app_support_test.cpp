@@ -80,14 +80,18 @@ public:
     cfg.subscription_lease = 600ms;
   }
 
-  /// Modules 0..n-1 with ids 0x10.., joined by `links`.
+  /// Modules 0..n-1 with ids 0x10.., joined by `links`; `edit` may change
+  /// the modules' configurations before they start.
   void build(size_t n,
-             std::vector<std::pair<std::vector<size_t>, std::string>> links) {
+             std::vector<std::pair<std::vector<size_t>, std::string>> links,
+             std::function<void(sim_network&)> edit = nullptr) {
     net = std::make_unique<sim_network>(*this, test_prefix());
     for (size_t i = 0; i < n; ++i)
       net->add_module(id_of(i));
     for (auto& [members, kind] : links)
       net->connect(members, kind);
+    if (edit)
+      edit(*net);
     add_app_support(*this, *net, cfg);
     net->start();
     net->advance(2s); // routes converge, every ASL knows its id
@@ -267,6 +271,44 @@ TEST_F(asl_test, requests_cross_a_router_and_an_8_byte_mtu_link) {
   EXPECT_EQ(stats(0).requests_sent, 3u);
   EXPECT_EQ(stats(2).requests_served, 3u);
   EXPECT_EQ(stats(2).oneway_delivered, 1u);
+}
+
+TEST_F(asl_test, requests_and_responses_take_the_published_routes) {
+  // 0 -Ethernet- 1 -CAN (MTU 8)- 2 as above, but modules 0 and 2 send on
+  // the routes their agents publish (routing/fast_routes.hpp; the
+  // simulation's packet observer, which keeps them on the agent's path, is
+  // off there). Module 1 forwards, fragments and reassembles as before.
+  build(3, {{{0, 1}, "ethernet"}, {{1, 2}, "can2.0"}}, [](sim_network& n) {
+    for (size_t i : {0, 2}) {
+      n.at(i).cfg.observer = nullptr;
+      n.at(i).cfg.fast_routes = std::make_shared<route_cell>();
+    }
+  });
+  auto log = std::make_shared<seen>();
+  add(2, "calc", "herm.example.calculator", spawn_calculator(log));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false});
+  ASSERT_TRUE(proxy) << render(proxy.error());
+  for (int32_t i = 0; i < 5; ++i) {
+    auto sum = ask<int32_t>(*proxy, 1s, int32_t{40}, i);
+    ASSERT_TRUE(sum) << render(sum.error());
+    EXPECT_EQ(*sum, 40 + i);
+  }
+  std::string text(300, 'x');
+  auto echo = ask<std::string>(*proxy, 1s, text);
+  ASSERT_TRUE(echo) << render(echo.error());
+  EXPECT_EQ(*echo, "echo: " + text);
+  EXPECT_EQ(stats(0).requests_sent, 6u);
+  EXPECT_EQ(stats(2).requests_served, 6u);
+  // Every request after the first route was in use and every response
+  // after the first went straight to the channel; the router forwarded
+  // them all.
+  auto s0 = net->stats(0);
+  auto s2 = net->stats(2);
+  EXPECT_GE(s0.fast_sent, 5u);
+  EXPECT_GE(s2.fast_sent, 5u);
+  EXPECT_GE(s0.originated, s0.fast_sent + 1);
+  EXPECT_GE(net->stats(1).forwarded, 12u);
+  EXPECT_EQ(net->stats(1).fast_sent, 0u); // no cell: nothing published
 }
 
 TEST_F(asl_test, many_concurrent_requests_each_get_their_own_answer) {

@@ -1,0 +1,198 @@
+// The data path of established routes (routing/fast_routes.hpp): what the
+// routing agent publishes, when, and that a packet put on a published next
+// hop takes the selected route. Deterministic (test coordinator).
+
+#include <gtest/gtest.h>
+
+#include "tests/support/actor_fixture.hpp"
+#include "tests/support/topology.hpp"
+#include "actors/testing/sim_network.hpp"
+#include "routing/fast_routes.hpp"
+
+using namespace herm;
+using namespace herm::test;
+using namespace herm::testkit;
+using namespace std::chrono_literals;
+
+namespace {
+
+class fast_routes_test : public actor_fixture {
+public:
+  /// A ring of six Ethernet links; module 0 publishes into `cell` and has
+  /// no observer (the others keep theirs, so paths are recorded from the
+  /// first hop on).
+  sim_network ring6(std::shared_ptr<route_cell> cell) {
+    auto t = ring(6, false);
+    sim_network net{*this, test_prefix()};
+    for (size_t i = 0; i < t.n; ++i)
+      net.add_module(id_of(i));
+    for (auto& [members, kind] : t.links)
+      net.connect(members, kind);
+    net.at(0).cfg.observer = nullptr;
+    net.at(0).cfg.fast_routes = std::move(cell);
+    net.start();
+    net.advance(1s);
+    return net;
+  }
+
+  /// Puts a tagged protocol-0 packet for `dst` on the next hop `snap`
+  /// publishes, as application support does; returns the tag.
+  uint64_t send_on(sim_network& net, const route_snapshot& snap,
+                   module_id dst) {
+    auto* hop = snap.lookup(dst, 0);
+    EXPECT_NE(hop, nullptr);
+    if (hop == nullptr)
+      return 0;
+    auto tag = next_tag_++;
+    data_header h;
+    h.src = snap.self;
+    h.dst = dst;
+    h.protocol = 0;
+    byte_buffer bytes;
+    encode(h, bytes);
+    for (int i = 0; i < 8; ++i)
+      bytes.push_back(static_cast<uint8_t>(tag >> (8 * i)));
+    caf::anon_send(hop->channel, write_packet{hop->neighbour, prio_normal,
+                                              std::move(bytes)});
+    net.run();
+    return tag;
+  }
+
+private:
+  uint64_t next_tag_ = uint64_t{1} << 40;
+};
+
+} // namespace
+
+TEST_F(fast_routes_test, nothing_is_published_before_the_module_sends) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  EXPECT_EQ(cell->get(), nullptr);
+}
+
+TEST_F(fast_routes_test, a_destination_sent_to_is_published_with_its_selected_next_hop) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  net.send(0, id_of(2));
+  auto snap = cell->get();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_EQ(snap->self, id_of(0));
+  EXPECT_EQ(snap->routes.size(), 1u);
+  EXPECT_EQ(snap->lookup(id_of(3), 0), nullptr);
+  for (uint8_t k = 0; k < size_classes; ++k)
+    EXPECT_NE(snap->lookup(id_of(2), k), nullptr) << "class " << int{k};
+  // 0 -> 2 goes 0-1-2: the packet put on the published hop arrives at 1
+  // and is forwarded to 2.
+  auto tag = send_on(net, *snap, id_of(2));
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(1), id_of(2)}));
+  EXPECT_EQ(net.at(2).received->size(), 2u);
+}
+
+TEST_F(fast_routes_test, the_snapshot_follows_a_route_change_at_once) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  net.send(0, id_of(2));
+  auto before = cell->get();
+  ASSERT_NE(before, nullptr);
+  net.cut(0); // link 0-1
+  net.advance(200ms);
+  auto after = cell->get();
+  ASSERT_NE(after, nullptr);
+  EXPECT_NE(after, before);
+  auto tag = send_on(net, *after, id_of(2));
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(5), id_of(4),
+                                                   id_of(3), id_of(2)}));
+  // A published snapshot never changes: the old one still names link 0-1.
+  EXPECT_NE(before->lookup(id_of(2), 0)->channel,
+            after->lookup(id_of(2), 0)->channel);
+}
+
+TEST_F(fast_routes_test, an_unreachable_destination_leaves_the_snapshot) {
+  auto cell = std::make_shared<route_cell>();
+  auto t = line(3, false);
+  sim_network net{*this, test_prefix()};
+  for (size_t i = 0; i < t.n; ++i)
+    net.add_module(id_of(i));
+  for (auto& [members, kind] : t.links)
+    net.connect(members, kind);
+  net.at(0).cfg.observer = nullptr;
+  net.at(0).cfg.fast_routes = cell;
+  net.start();
+  net.advance(1s);
+  net.send(0, id_of(2));
+  ASSERT_NE(cell->get(), nullptr);
+  ASSERT_NE(cell->get()->lookup(id_of(2), 0), nullptr);
+  net.kill(2);
+  net.advance(5s);
+  ASSERT_FALSE(net.route(0, id_of(2)));
+  auto snap = cell->get();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_EQ(snap->lookup(id_of(2), 0), nullptr);
+}
+
+TEST_F(fast_routes_test, destinations_past_the_bound_are_refused_and_counted) {
+  auto cell = std::make_shared<route_cell>(2);
+  auto net = ring6(cell);
+  for (size_t i = 1; i <= 4; ++i)
+    net.send(0, id_of(i));
+  net.send(0, id_of(4));
+  auto snap = cell->get();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_EQ(snap->routes.size(), 2u);
+  EXPECT_NE(snap->lookup(id_of(1), 0), nullptr);
+  EXPECT_NE(snap->lookup(id_of(2), 0), nullptr);
+  // 3 once, 4 twice: every packet sent through the agent for want of room.
+  EXPECT_EQ(net.stats(0).fast_routes_refused, 3u);
+}
+
+TEST_F(fast_routes_test, the_agent_counts_what_its_senders_sent_on_the_fast_path) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  net.send(0, id_of(2));
+  auto before = net.stats(0);
+  cell->count_sent();
+  cell->count_sent();
+  auto after = net.stats(0);
+  EXPECT_EQ(after.fast_sent, 2u);
+  EXPECT_EQ(after.originated, before.originated + 2);
+}
+
+TEST_F(fast_routes_test, nothing_is_published_with_an_observer_a_tracer_or_a_key) {
+  for (int variant = 0; variant < 3; ++variant) {
+    auto cell = std::make_shared<route_cell>();
+    auto t = line(2, false);
+    sim_network net{*this, test_prefix() + std::to_string(variant)};
+    for (size_t i = 0; i < t.n; ++i)
+      net.add_module(id_of(i));
+    for (auto& [members, kind] : t.links)
+      net.connect(members, kind);
+    auto& cfg = net.at(0).cfg;
+    cfg.fast_routes = cell;
+    if (variant == 1) {
+      cfg.observer = nullptr;
+      cfg.tracer = [](const packet_trace&) {};
+    } else if (variant == 2) {
+      // Both ends keyed: routes form, data must be signed as configured.
+      for (size_t i = 0; i < t.n; ++i) {
+        net.at(i).cfg.observer = nullptr;
+        net.at(i).cfg.auth.key = std::vector<uint8_t>(16, 0x5a);
+      }
+    }
+    net.start();
+    net.advance(2s);
+    ASSERT_TRUE(net.route(0, id_of(1))) << "variant " << variant;
+    net.send(0, id_of(1));
+    EXPECT_EQ(net.at(1).received->size(), 1u) << "variant " << variant;
+    EXPECT_EQ(cell->get(), nullptr) << "variant " << variant;
+  }
+}
+
+TEST_F(fast_routes_test, the_snapshot_is_withdrawn_when_the_agent_ends) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  net.send(0, id_of(2));
+  ASSERT_NE(cell->get(), nullptr);
+  net.kill(0);
+  net.run();
+  EXPECT_EQ(cell->get(), nullptr);
+}
