@@ -64,6 +64,8 @@ struct asl_state {
   std::unique_ptr<topic_table> topics;
   /// What the cores decided to send, transmitted by flush.
   asl_outbox out;
+  /// What flush is sending (the outbox's previous items).
+  decltype(asl_outbox::items) flushing;
   reach_table reach;
   caf::strong_actor_ptr sink;
   uint32_t ticks = 0;
@@ -85,21 +87,24 @@ bool send_fast(asl_impl self, module_id dst, const asl_message& msg,
   auto snap = cell->get();
   if (!snap || dst == snap->self)
     return false;
+  // Encoded into the scratch buffer first: the packet's one allocation
+  // then has its final size.
+  auto& body = self->state.buf;
+  body.clear();
+  encode(msg, body);
   data_header h;
   h.src = snap->self;
   h.dst = dst;
   h.priority = prio_normal;
   h.protocol = asl_protocol;
-  byte_buffer bytes(header_size(h));
-  encode(msg, bytes);
-  h.size_class = size_class_of(bytes.size() - header_size(h));
+  h.size_class = size_class_of(body.size());
   auto* hop = snap->lookup(dst, h.size_class);
   if (hop == nullptr)
     return false;
-  auto& hdr = self->state.buf;
-  hdr.clear();
-  encode(h, hdr);
-  std::copy(hdr.begin(), hdr.end(), bytes.begin());
+  byte_buffer bytes;
+  bytes.reserve(header_size(h) + body.size());
+  encode(h, bytes);
+  bytes.insert(bytes.end(), body.begin(), body.end());
   cell->count_sent();
   self->send(hop->channel,
              write_packet{hop->neighbour, h.priority, std::move(bytes)});
@@ -119,10 +124,13 @@ void send_now(asl_impl self, module_id dst, const asl_message& msg,
 
 /// Transmits what the cores put in the outbox, in order.
 void flush(asl_impl self) {
-  auto items = std::move(self->state.out.items);
-  self->state.out.items.clear();
-  for (auto& x : items)
+  auto& st = self->state;
+  // Swapped with a vector kept for the purpose, so that neither allocates
+  // once both have grown.
+  st.flushing.swap(st.out.items);
+  for (auto& x : st.flushing)
     send_now(self, x.dst, x.msg, x.sign);
+  st.flushing.clear();
 }
 
 /// Sends an ASL message over the network (after what the outbox holds);

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <memory>
 #include <random>
+#include <type_traits>
 
 #include "caf/actor_system.hpp"
 
@@ -260,7 +261,11 @@ void act(agent_impl self, address_allocator::actions acts,
 
 // -- data packets ---------------------------------------------------------------
 
-void deliver(agent_impl self, const data_header& h, const byte_buffer& bytes) {
+/// Hands a data packet for this module (header `h`, `packet` the whole
+/// packet) to the receiver of its protocol; the payload is moved out of
+/// `packet` (no copy) when it is an rvalue.
+template <class Packet>
+void deliver(agent_impl self, const data_header& h, Packet&& packet) {
   auto& st = self->state;
   auto i = st.receivers.find(h.protocol);
   if (i == st.receivers.end()) {
@@ -277,10 +282,15 @@ void deliver(agent_impl self, const data_header& h, const byte_buffer& bytes) {
   // A keyed module keeps the authenticated flag of a data packet whose
   // trailer it verified (authenticate()); a keyless one never gets here
   // with it set (on_data).
-  packet_delivered msg{h.src, h.protocol, h.priority, hops,
-                       byte_buffer(bytes.begin() + header_size(h),
-                                   bytes.end()),
+  packet_delivered msg{h.src, h.protocol, h.priority, hops, {},
                        h.authenticated};
+  auto body = packet.begin() + static_cast<ptrdiff_t>(header_size(h));
+  if constexpr (std::is_rvalue_reference_v<Packet&&>) {
+    packet.erase(packet.begin(), body);
+    msg.payload = std::move(packet);
+  } else {
+    msg.payload.assign(body, packet.end());
+  }
   self->send(i->second, std::move(msg));
 }
 
@@ -368,7 +378,7 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
       return;
     }
     // Link-local broadcast: for the neighbours that hear it only.
-    deliver(self, *h, bytes);
+    deliver(self, *h, std::move(bytes));
     return;
   }
   if (st.cfg.observer)
@@ -376,7 +386,7 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
   if (h->dst == st.table.self()) {
     if (st.cfg.tracer)
       st.cfg.tracer(make_trace(self, packet_trace::delivered, *h, bytes.size(), ch));
-    deliver(self, *h, bytes);
+    deliver(self, *h, std::move(bytes));
   } else {
     forward(self, *h, std::move(bytes), ch);
   }
@@ -658,7 +668,7 @@ caf::error originate(agent_impl self, send_packet& msg) {
   bytes.insert(bytes.end(), msg.payload.begin(), msg.payload.end());
   ++st.stats.originated;
   if (msg.dst == self_id) {
-    deliver(self, h, bytes);
+    deliver(self, h, std::move(bytes));
     return caf::none;
   }
   if (msg.dst == broadcast_module) {
