@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
+
 #include "tests/support/actor_fixture.hpp"
 #include "tests/support/topology.hpp"
 #include "actors/testing/sim_network.hpp"
@@ -18,19 +20,31 @@ namespace {
 
 class fast_routes_test : public actor_fixture {
 public:
-  /// A ring of six Ethernet links; module 0 publishes into `cell` and has
-  /// no observer (the others keep theirs, so paths are recorded from the
-  /// first hop on).
-  sim_network ring6(std::shared_ptr<route_cell> cell) {
-    auto t = ring(6, false);
-    sim_network net{*this, test_prefix()};
+  /// The network `t`, started after `edit` changed its configurations.
+  sim_network build(const topology& t, std::function<void(sim_network&)> edit) {
+    sim_network net{*this, test_prefix() + "-" + std::to_string(++nets_)};
     for (size_t i = 0; i < t.n; ++i)
       net.add_module(id_of(i));
     for (auto& [members, kind] : t.links)
       net.connect(members, kind);
-    net.at(0).cfg.observer = nullptr;
-    net.at(0).cfg.fast_routes = std::move(cell);
+    edit(net);
     net.start();
+    return net;
+  }
+
+  /// Module 0 publishes into `cell` and has no observer (the others keep
+  /// theirs, so paths are recorded from the first hop on).
+  static std::function<void(sim_network&)>
+  publishing(std::shared_ptr<route_cell> cell) {
+    return [cell](sim_network& net) {
+      net.at(0).cfg.observer = nullptr;
+      net.at(0).cfg.fast_routes = cell;
+    };
+  }
+
+  /// A ring of six Ethernet links, routes converged, module 0 publishing.
+  sim_network ring6(std::shared_ptr<route_cell> cell) {
+    auto net = build(ring(6, false), publishing(std::move(cell)));
     net.advance(1s);
     return net;
   }
@@ -60,6 +74,7 @@ public:
 
 private:
   uint64_t next_tag_ = uint64_t{1} << 40;
+  int nets_ = 0;
 };
 
 } // namespace
@@ -109,15 +124,7 @@ TEST_F(fast_routes_test, the_snapshot_follows_a_route_change_at_once) {
 
 TEST_F(fast_routes_test, an_unreachable_destination_leaves_the_snapshot) {
   auto cell = std::make_shared<route_cell>();
-  auto t = line(3, false);
-  sim_network net{*this, test_prefix()};
-  for (size_t i = 0; i < t.n; ++i)
-    net.add_module(id_of(i));
-  for (auto& [members, kind] : t.links)
-    net.connect(members, kind);
-  net.at(0).cfg.observer = nullptr;
-  net.at(0).cfg.fast_routes = cell;
-  net.start();
+  auto net = build(line(3, false), publishing(cell));
   net.advance(1s);
   net.send(0, id_of(2));
   ASSERT_NE(cell->get(), nullptr);
@@ -160,25 +167,20 @@ TEST_F(fast_routes_test, the_agent_counts_what_its_senders_sent_on_the_fast_path
 TEST_F(fast_routes_test, nothing_is_published_with_an_observer_a_tracer_or_a_key) {
   for (int variant = 0; variant < 3; ++variant) {
     auto cell = std::make_shared<route_cell>();
-    auto t = line(2, false);
-    sim_network net{*this, test_prefix() + std::to_string(variant)};
-    for (size_t i = 0; i < t.n; ++i)
-      net.add_module(id_of(i));
-    for (auto& [members, kind] : t.links)
-      net.connect(members, kind);
-    auto& cfg = net.at(0).cfg;
-    cfg.fast_routes = cell;
-    if (variant == 1) {
-      cfg.observer = nullptr;
-      cfg.tracer = [](const packet_trace&) {};
-    } else if (variant == 2) {
-      // Both ends keyed: routes form, data must be signed as configured.
-      for (size_t i = 0; i < t.n; ++i) {
-        net.at(i).cfg.observer = nullptr;
-        net.at(i).cfg.auth.key = std::vector<uint8_t>(16, 0x5a);
+    auto net = build(line(2, false), [&](sim_network& n) {
+      auto& cfg = n.at(0).cfg;
+      cfg.fast_routes = cell;
+      if (variant == 1) {
+        cfg.observer = nullptr;
+        cfg.tracer = [](const packet_trace&) {};
+      } else if (variant == 2) {
+        // Both ends keyed: routes form, data must be signed as configured.
+        for (size_t i = 0; i < n.size(); ++i) {
+          n.at(i).cfg.observer = nullptr;
+          n.at(i).cfg.auth.key = std::vector<uint8_t>(16, 0x5a);
+        }
       }
-    }
-    net.start();
+    });
     net.advance(2s);
     ASSERT_TRUE(net.route(0, id_of(1))) << "variant " << variant;
     net.send(0, id_of(1));
