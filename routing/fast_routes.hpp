@@ -13,8 +13,9 @@
 // has not said goodbye; only for destinations this module originated a
 // unicast packet to (at most `route_cell::max_destinations()`, counted in
 // routing_stats::fast_routes_refused beyond); republished whenever a
-// selected route to one of them changes, a channel comes or goes, or the
-// module's address changes; withdrawn when the agent ends.
+// selected route to one of them changes (a channel that ends takes its
+// routes with it, so that is such a change) or the module's address
+// changes; withdrawn when the agent ends.
 //
 // Order: a packet sent through the snapshot may overtake one sent through
 // the agent just before the snapshot appeared or changed (as a route change

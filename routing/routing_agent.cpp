@@ -807,7 +807,6 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       cs.cost = link_metrics(up.info.profile);
       cs.code = link_code_of(up.info.profile.name);
       self->state.channels[up.info.id] = std::move(cs);
-      publish_fast_routes(self);
       self->request(up.handle, caf::infinite, atom::subscribe_v,
                     caf::actor_cast<channel_reader_actor>(self))
         .then([](channel_info&) {}, [](caf::error&) {});
@@ -818,7 +817,6 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
       st.channels.erase(down.id);
       st.neighbours.remove_channel(down.id);
       apply_change(self, st.table.remove_channel(down.id));
-      publish_fast_routes(self);
     },
     [self](packet_received& pkt) { on_packet(self, pkt); },
     [](link_event&) {
