@@ -1,0 +1,98 @@
+/* hermc_config.h: every compile-time bound of the HERM C client (hermc).
+ *
+ * Each macro has a default here and can be overridden on the compiler's
+ * command line (-DHERMC_MTU=64 ...). The library allocates nothing at run
+ * time: every buffer below is an array inside a struct the application
+ * owns, sized by these macros. Whatever would exceed a bound is dropped or
+ * refused and counted (see the counters of each module's header).
+ *
+ * RAM per object, with the defaults (AVR, 2-byte size_t):
+ *   hermc_link_rx   ~ (HERMC_MTU + 2) + HERMC_RX_SLOTS * (HERMC_MAX_PACKET + 14) + 60
+ *   hermc_link_tx   ~ HERMC_TX_RING + 8
+ *   hermc_can       ~ HERMC_CAN_RX_SLOTS * (HERMC_MAX_PACKET + 14) + HERMC_MAX_PACKET
+ *                     + 4 * HERMC_CAN_TX_SEQS + 80
+ */
+#ifndef HERMC_CONFIG_H
+#define HERMC_CONFIG_H
+
+/* -- link layer (hermc_link.h) ---------------------------------------------- */
+
+/* Serial link MTU, bytes of one frame (fragment header included) before
+ * CRC-16 and COBS. Both ends must agree; HERM's profile `rs232c` uses 32.
+ * 8..255 (docs/protocol.md, "Serial framing"). */
+#ifndef HERMC_MTU
+#define HERMC_MTU 32
+#endif
+
+/* Largest packet (network packet, before fragmentation) the client receives,
+ * bytes. A first fragment announcing more, or a single frame carrying more,
+ * is dropped as malformed before anything is stored. One reassembly slot
+ * holds HERMC_MAX_PACKET + 4 bytes (the CRC-32). 1..65000. */
+#ifndef HERMC_MAX_PACKET
+#define HERMC_MAX_PACKET 160
+#endif
+
+/* Concurrent reassemblies on the serial line. A serial line has one sender
+ * and one lane, so one slot is enough: frames arrive in order, and a new
+ * first frame means the packet under way lost its tail. 1..255. */
+#ifndef HERMC_RX_SLOTS
+#define HERMC_RX_SLOTS 1
+#endif
+
+/* An incomplete packet older than this is dropped (counter timed_out),
+ * milliseconds; measured with the application's tick (hermc_*_tick), so the
+ * resolution is the tick period. 2000 as HERM's C++ reassembler. */
+#ifndef HERMC_REASSEMBLY_TIMEOUT_MS
+#define HERMC_REASSEMBLY_TIMEOUT_MS 2000u
+#endif
+
+/* Transmit ring of the serial link, bytes on the wire (COBS-encoded frames
+ * with delimiters) waiting for the UART. A packet is queued whole or not at
+ * all: hermc_link_tx_wire_bound(len) bytes must be free. The default takes
+ * one packet of HERMC_MAX_PACKET bytes at MTU 32 (at most 217 bytes).
+ * 16..65535. */
+#ifndef HERMC_TX_RING
+#define HERMC_TX_RING 256
+#endif
+
+/* -- CAN option (hermc_can.h) ------------------------------------------------ */
+
+/* Concurrent reassemblies on a CAN bus, one per (source node, lane) under
+ * way. When all are busy, a new packet of a sender that has one under way
+ * evicts that sender's oldest; another sender's new packet is refused
+ * (counter over_limit). 1..255. */
+#ifndef HERMC_CAN_RX_SLOTS
+#define HERMC_CAN_RX_SLOTS 2
+#endif
+
+/* Packet tag sequences the CAN sender keeps, one per (destination, lane) it
+ * sends to; beyond that the least recently used one starts over at tag 0
+ * (counter tag_evictions), as HERM's C++ fragmenter does past 4096. A leaf
+ * node talks to its neighbour and to broadcast: 4 covers two priorities
+ * each. 1..255. */
+#ifndef HERMC_CAN_TX_SEQS
+#define HERMC_CAN_TX_SEQS 4
+#endif
+
+/* -- checks ------------------------------------------------------------------- */
+
+#if HERMC_MTU < 8 || HERMC_MTU > 255
+#error "HERMC_MTU must be 8..255 (docs/protocol.md, Serial framing)"
+#endif
+#if HERMC_MAX_PACKET < 1 || HERMC_MAX_PACKET > 65000
+#error "HERMC_MAX_PACKET must be 1..65000"
+#endif
+#if HERMC_RX_SLOTS < 1 || HERMC_RX_SLOTS > 255
+#error "HERMC_RX_SLOTS must be 1..255"
+#endif
+#if HERMC_CAN_RX_SLOTS < 1 || HERMC_CAN_RX_SLOTS > 255
+#error "HERMC_CAN_RX_SLOTS must be 1..255"
+#endif
+#if HERMC_CAN_TX_SEQS < 1 || HERMC_CAN_TX_SEQS > 255
+#error "HERMC_CAN_TX_SEQS must be 1..255"
+#endif
+#if HERMC_TX_RING < 16 || HERMC_TX_RING > 65535
+#error "HERMC_TX_RING must be 16..65535"
+#endif
+
+#endif /* HERMC_CONFIG_H */
