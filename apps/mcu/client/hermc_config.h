@@ -74,6 +74,47 @@
 #define HERMC_CAN_TX_SEQS 4
 #endif
 
+/* -- the module (hermc.h): APOs, discovery, requests, topics, floods ------------ */
+
+/* Local APOs (hermc_register_apo). 1..255. */
+#ifndef HERMC_MAX_APOS
+#define HERMC_MAX_APOS 4
+#endif
+
+/* Remote APOs this module sends requests to (hermc_remote). 1..255. */
+#ifndef HERMC_MAX_REMOTES
+#define HERMC_MAX_REMOTES 2
+#endif
+
+/* Requests awaiting a response (hermc_request with a callback); one more is
+ * refused (HERMC_ERR_NO_ROOM, counter requests_refused). 1..255. */
+#ifndef HERMC_MAX_PENDING
+#define HERMC_MAX_PENDING 4
+#endif
+
+/* Topics this module publishes (hermc_topic). 1..255. */
+#ifndef HERMC_MAX_TOPICS
+#define HERMC_MAX_TOPICS 2
+#endif
+
+/* Subscriptions of other modules held, over all topics; a new one past it
+ * is refused (counter subscribers_refused) until a lease ends. 1..255. */
+#ifndef HERMC_MAX_SUBSCRIBERS
+#define HERMC_MAX_SUBSCRIBERS 4
+#endif
+
+/* Floods (src, flood_id) remembered to drop their copies; when full, the
+ * oldest is replaced (counter flood_evictions when it was still younger
+ * than HERMC_FLOOD_MEMORY_MS). 1..255. */
+#ifndef HERMC_FLOOD_CACHE
+#define HERMC_FLOOD_CACHE 8
+#endif
+
+/* How long a flood is remembered, ms (HERM's flood_memory). */
+#ifndef HERMC_FLOOD_MEMORY_MS
+#define HERMC_FLOOD_MEMORY_MS 30000u
+#endif
+
 /* -- checks ------------------------------------------------------------------- */
 
 #if HERMC_MTU < 8 || HERMC_MTU > 255
@@ -93,6 +134,16 @@
 #endif
 #if HERMC_TX_RING < 16 || HERMC_TX_RING > 65535
 #error "HERMC_TX_RING must be 16..65535"
+#endif
+
+#if HERMC_MAX_APOS < 1 || HERMC_MAX_APOS > 255 || HERMC_MAX_REMOTES < 1 \
+  || HERMC_MAX_REMOTES > 255 || HERMC_MAX_PENDING < 1 || HERMC_MAX_PENDING > 255 \
+  || HERMC_MAX_TOPICS < 1 || HERMC_MAX_TOPICS > 255 || HERMC_MAX_SUBSCRIBERS < 1 \
+  || HERMC_MAX_SUBSCRIBERS > 255 || HERMC_FLOOD_CACHE < 1 || HERMC_FLOOD_CACHE > 255
+#error "HERMC_MAX_APOS, _REMOTES, _PENDING, _TOPICS, _SUBSCRIBERS and HERMC_FLOOD_CACHE must be 1..255"
+#endif
+#if HERMC_MAX_PACKET < 64
+#error "the module needs HERMC_MAX_PACKET of at least 64 (a hello, an update, a discovery answer)"
 #endif
 
 #endif /* HERMC_CONFIG_H */
