@@ -16,6 +16,7 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -155,7 +156,11 @@ public:
       listen_fd_(listen_fd),
       stop_read_(stop_read),
       stop_write_(stop_write),
-      inode_(inode) {
+      inode_(inode),
+      // Written by a worker that ends, so the accept loop reaps it without
+      // waking on a timer. Without it (no eventfd) the loop reaps on the
+      // next connection instead, and at the latest when it stops.
+      reaped_fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
     thread_ = std::thread{[this] { run(); }};
   }
 
@@ -167,6 +172,8 @@ public:
     ::close(listen_fd_);
     ::close(stop_read_);
     ::close(stop_write_);
+    if (reaped_fd_ >= 0)
+      ::close(reaped_fd_);
     // Remove the socket file only if it is still ours (not a successor's).
     struct stat sb;
     if (::lstat(path_.c_str(), &sb) == 0 && sb.st_ino == inode_)
@@ -198,13 +205,20 @@ private:
       clients_ = workers.size();
     };
     for (;;) {
-      pollfd p[2] = {{listen_fd_, POLLIN, 0}, {stop_read_, POLLIN, 0}};
-      // Wakes now and then to reap workers that ended.
-      auto n = ::poll(p, 2, 200);
+      pollfd p[3] = {{listen_fd_, POLLIN, 0},
+                     {stop_read_, POLLIN, 0},
+                     {reaped_fd_, POLLIN, 0}};
+      // Sleeps until a client connects, a worker ends or we stop: an idle
+      // module's control service costs no wake-ups.
+      auto n = ::poll(p, reaped_fd_ >= 0 ? 3 : 2, -1);
       if (n < 0 && errno == EINTR)
         continue;
       if (n < 0 || p[1].revents != 0)
         break;
+      if (reaped_fd_ >= 0 && p[2].revents != 0) {
+        uint64_t ended = 0;
+        [[maybe_unused]] auto r = ::read(reaped_fd_, &ended, sizeof(ended));
+      }
       reap();
       if (p[0].revents == 0)
         continue;
@@ -223,6 +237,10 @@ private:
           serve_client(fd);
           ::close(fd);
           raw->done = true;
+          if (reaped_fd_ >= 0) {
+            uint64_t one = 1;
+            [[maybe_unused]] auto r = ::write(reaped_fd_, &one, sizeof(one));
+          }
         }};
       } catch (const std::system_error& ex) {
         refuse(fd, std::string{"cannot serve another client: "} + ex.what());
@@ -419,6 +437,7 @@ private:
   int stop_read_;
   int stop_write_;
   ino_t inode_;
+  int reaped_fd_;
   std::atomic<size_t> clients_{0};
   std::atomic<uint64_t> clients_refused_{0};
   std::atomic<uint64_t> clients_timed_out_{0};

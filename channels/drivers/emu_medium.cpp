@@ -7,6 +7,7 @@
 #include <fcntl.h>
 #include <sys/epoll.h>
 #include <sys/file.h>
+#include <sys/inotify.h>
 #include <sys/mman.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -399,7 +400,8 @@ caf::error station::attach(event_loop& loop, size_t max_datagram) {
                 std::string{"cannot receive on "} + spec_.texts.socket_noun
                   + " " + sock_path_ + ": " + render(err));
   receiving_ = true;
-  arm_liveness_timer();
+  if (!watch_files(loop))
+    arm_liveness_timer();
   bool pending = false;
   {
     std::lock_guard<std::mutex> guard{failure_mtx_};
@@ -429,6 +431,45 @@ void station::detach() {
   hold_timer_ = {};
   loop->cancel_timer(liveness_timer_);
   liveness_timer_ = {};
+  if (notify_fd_) {
+    loop->unwatch(notify_fd_.get());
+    notify_fd_.reset();
+  }
+}
+
+/// Loop thread: watches the medium's directory, so that a removed or
+/// replaced socket or state file is noticed at once and an idle station
+/// wakes for nothing else. False (the caller falls back to the liveness
+/// timer) when inotify or the loop refuses.
+bool station::watch_files(event_loop& loop) {
+  posix::unique_fd fd{::inotify_init1(IN_NONBLOCK | IN_CLOEXEC)};
+  if (!fd)
+    return false;
+  constexpr uint32_t mask = IN_DELETE | IN_CREATE | IN_MOVED_FROM
+                            | IN_MOVED_TO | IN_DELETE_SELF | IN_MOVE_SELF;
+  if (::inotify_add_watch(fd.get(), dir_.c_str(), mask) < 0)
+    return false;
+  auto stop = stop_;
+  if (loop.watch(fd.get(), EPOLLIN, [this, stop](uint32_t) {
+        if (!stop->load())
+          on_files_changed();
+      }))
+    return false;
+  notify_fd_ = std::move(fd);
+  return true;
+}
+
+/// Readiness callback of the inotify descriptor: which entry changed does
+/// not matter (an overflowed queue neither), the files are checked again.
+void station::on_files_changed() {
+  alignas(inotify_event) char buf[4096];
+  while (::read(notify_fd_.get(), buf, sizeof(buf)) > 0) {
+    // Drained; the events themselves are not needed.
+  }
+  if (!receiving_)
+    return;
+  if (auto err = check_files())
+    report_failure(std::move(err));
 }
 
 /// Readiness callback: like one turn of the receive thread it replaces, due

@@ -68,7 +68,10 @@ namespace herm::emu_medium {
 constexpr uint64_t min_station = 1;
 constexpr uint64_t max_station = 254;
 
-/// How often a receiving station checks that its files still exist.
+/// How often a receiving station checks that its files still exist when it
+/// cannot watch the medium's directory with inotify (the per-user limit of
+/// inotify instances, fs.inotify.max_user_instances, is reached). With
+/// inotify an idle station checks only when a file of the medium changes.
 constexpr int64_t liveness_period_ns = 100'000'000;
 /// Peers are rescanned at least this often (and whenever a station joins
 /// or leaves through a driver: the state file's generation counter).
@@ -483,9 +486,11 @@ public:
   /// the receive socket (readiness callback: reads up to
   /// max_reads_per_wakeup datagrams of up to `max_datagram` bytes, has the
   /// client accept them, delivers the due ones and holds the others), arms
-  /// a loop timer for the earliest held datagram (max_held_frames) and one
-  /// that checks every liveness_period_ns that the socket and state files
-  /// are still ours. Registers through loop.run_sync; starts no thread.
+  /// a loop timer for the earliest held datagram (max_held_frames), and
+  /// checks that the socket and state files are still ours whenever an
+  /// entry of the medium's directory is removed, renamed or created
+  /// (inotify, watched on the loop), or every liveness_period_ns where
+  /// inotify is unavailable. Registers through loop.run_sync; starts no thread.
   /// Once per station. Errors: ec::device_failed after request_stop,
   /// ec::device_unavailable when the loop refuses the socket.
   caf::error start_receiving(event_loop& loop, size_t max_datagram);
@@ -540,6 +545,8 @@ private:
   void arm_hold_timer();
   void on_liveness_timer();
   void arm_liveness_timer();
+  bool watch_files(event_loop& loop);
+  void on_files_changed();
   void on_tx_failure();
   void report_failure(caf::error err);
 
@@ -590,6 +597,7 @@ private:
   event_loop::timer_handle hold_timer_;
   int64_t hold_timer_at_ = 0;
   event_loop::timer_handle liveness_timer_;
+  posix::unique_fd notify_fd_; // inotify on dir_, while receiving
 };
 
 // -- a driver's life cycle over its station -----------------------------------
