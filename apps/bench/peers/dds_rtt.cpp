@@ -262,10 +262,6 @@ client_result dds_oneway_client(const endpoint_params& p) {
 
 } // namespace
 
-std::string dds_unavailable() {
-  return {};
-}
-
 int dds_server(const endpoint_params& p) {
   if (p.mode == "oneway")
     return dds_count(p);
@@ -307,16 +303,11 @@ client_result dds_client(const endpoint_params& p) {
   out.payload._length = out.payload._maximum = static_cast<uint32_t>(buf.size());
   out.payload._release = false;
   auto timeout = DDS_MSECS(p.timeout.count());
-  res.rtt_ns.reserve(p.count);
-  for (uint32_t i = 0; i < p.warmup + p.count;) {
-    if (i == p.warmup)
-      timed_part_begins(); // once: a warm-up resend never reaches here at warmup
-    fill_payload(buf, i);
-    auto t0 = now_ns();
+  run_round_trips(p, buf, res, [&](uint32_t i) {
     auto rc = dds_write(e.writer, &out);
     if (rc < 0) {
       res.error = dds_text("dds_write", rc);
-      return res;
+      return round_trip::failed;
     }
     // The server's writer may match our reader a little after ours matched
     // it: a ping answered too early is lost, so the warm-up resends.
@@ -333,43 +324,17 @@ client_result dds_client(const endpoint_params& p) {
         dds_return_loan(e.reader, &sample, 1);
       }
     } while (n == 1 && seq != i);
-    auto t1 = now_ns();
-    if (n != 1) {
-      if (n == 0 && i < p.warmup)
-        continue; // resend this warm-up ping
-      res.error = n == 0 ? "dds: no pong " + std::to_string(i) + " in time"
-                         : dds_text("dds_take", n);
-      return res;
-    }
-    if (i >= p.warmup)
-      res.rtt_ns.push_back(t1 - t0);
-    ++i;
-    if (p.gap.count() > 0)
-      std::this_thread::sleep_for(p.gap);
-  }
-  timed_part_ends();
+    if (n == 1)
+      return round_trip::replied;
+    if (n == 0 && i < p.warmup)
+      return round_trip::resend;
+    res.error = n == 0 ? "dds: no pong " + std::to_string(i) + " in time"
+                       : dds_text("dds_take", n);
+    return round_trip::failed;
+  });
   return res;
 }
 
 } // namespace herm::bench
 
-#else // no Cyclone DDS
-
-namespace herm::bench {
-
-std::string dds_unavailable() {
-  return "Cyclone DDS was not found when herm-bench-rtt was built (apt-get "
-         "install cyclonedds-dev, then reconfigure)";
-}
-
-int dds_server(const endpoint_params&) {
-  return 1;
-}
-
-client_result dds_client(const endpoint_params&) {
-  return {{}, dds_unavailable()};
-}
-
-} // namespace herm::bench
-
-#endif
+#endif // HERM_BENCH_HAVE_DDS

@@ -122,12 +122,37 @@ run_figures summarize(const std::vector<int64_t>& ns) {
 
 // -- the child roles -----------------------------------------------------------------
 
-int run_endpoint(const std::string& role, const endpoint_params& p) {
-  static const std::map<std::string, std::pair<server_fn, client_fn>> fns{
-    {"udp", {udp_server, udp_client}},   {"herm", {herm_server, herm_client}},
-    {"caf", {caf_server, caf_client}},   {"zmq", {zmq_server, zmq_client}},
-    {"dds", {dds_server, dds_client}},
+} // namespace
+
+const std::vector<transport>& herm::bench::transports() {
+  static const std::vector<transport> all{
+    {"udp", udp_server, udp_client, {}},
+    {"herm", herm_server, herm_client, {}},
+    {"caf", caf_server, caf_client, {}},
+#ifdef HERM_BENCH_HAVE_ZMQ
+    {"zmq", zmq_server, zmq_client, {}},
+#else
+    missing_transport("zmq", "libzmq", "libzmq3-dev"),
+#endif
+#ifdef HERM_BENCH_HAVE_DDS
+    {"dds", dds_server, dds_client, {}},
+#else
+    missing_transport("dds", "Cyclone DDS", "cyclonedds-dev"),
+#endif
   };
+  return all;
+}
+
+const transport* herm::bench::find_transport(const std::string& name) {
+  for (auto& t : transports())
+    if (t.name == name)
+      return &t;
+  return nullptr;
+}
+
+namespace {
+
+int run_endpoint(const std::string& role, const endpoint_params& p) {
   if (p.counter_fd >= 0)
     attach_counter_page(p.counter_fd, role == "router"   ? slot_router
                                       : role == "server" ? slot_server
@@ -142,14 +167,18 @@ int run_endpoint(const std::string& role, const endpoint_params& p) {
   if (p.mode == "inprocess" && role == "client") {
     res = inprocess_client(p);
   } else {
-    auto i = fns.find(p.transport);
-    if (i == fns.end()) {
+    auto* t = find_transport(p.transport);
+    if (t == nullptr) {
       std::cout << "error unknown transport '" << p.transport << "'" << std::endl;
       return 2;
     }
+    if (!t->unavailable.empty()) {
+      std::cout << "error " << t->unavailable << std::endl;
+      return 1;
+    }
     if (role == "server")
-      return i->second.first(p);
-    res = i->second.second(p);
+      return t->server(p);
+    res = t->client(p);
   }
   if (!res.error.empty()) {
     std::cout << "error " << res.error << std::endl;
@@ -380,21 +409,24 @@ int main(int argc, char** argv) {
   if (!parse_sizes(sizes_arg, sizes)
       || !parse_sizes(app.count("--sizes") > 0 ? sizes_arg : oneway_sizes_arg, oneway_sizes))
     return 2;
-  auto families = only.empty() ? std::vector<std::string>{"udp", "herm", "caf", "zmq", "dds"}
-                               : split(only);
+  std::vector<std::string> families;
+  if (only.empty())
+    for (auto& t : transports())
+      families.push_back(t.name);
+  else
+    families = split(only);
   std::vector<std::pair<std::string, std::string>> skipped;
   std::vector<std::string> available;
   for (auto& f : families) {
-    if (f == "zmq" && !zmq_unavailable().empty())
-      skipped.emplace_back("zmq", zmq_unavailable());
-    else if (f == "dds" && !dds_unavailable().empty())
-      skipped.emplace_back("dds", dds_unavailable());
-    else if (f == "udp" || f == "herm" || f == "caf" || f == "zmq" || f == "dds")
-      available.push_back(f);
-    else {
+    auto* t = find_transport(f);
+    if (t == nullptr) {
       std::cerr << "--only: unknown transport '" << f << "'" << std::endl;
       return 2;
     }
+    if (t->unavailable.empty())
+      available.push_back(f);
+    else
+      skipped.emplace_back(f, t->unavailable);
   }
   auto policies = split(policies_arg);
   for (auto& pol : policies) {

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -176,14 +177,37 @@ int herm_server(const endpoint_params& p);
 client_result herm_client(const endpoint_params& p);
 int caf_server(const endpoint_params& p);
 client_result caf_client(const endpoint_params& p);
+// Built only when CMake found their library (HERM_BENCH_HAVE_ZMQ,
+// HERM_BENCH_HAVE_DDS); transports() says when they are not.
 int zmq_server(const endpoint_params& p);
 client_result zmq_client(const endpoint_params& p);
 int dds_server(const endpoint_params& p);
 client_result dds_client(const endpoint_params& p);
 
-/// Empty when the transport was built in; otherwise why it was not.
-std::string zmq_unavailable();
-std::string dds_unavailable();
+/// One transport measured: its name (as --only and the report spell it) and
+/// its two sides, or, when it was not built in, why not (`unavailable`;
+/// server and client are then null).
+struct transport {
+  std::string name;
+  server_fn server = nullptr;
+  client_fn client = nullptr;
+  std::string unavailable;
+};
+
+/// Transport `name` as it stands when CMake did not find `library` (the
+/// Debian package `package` provides it).
+inline transport missing_transport(const std::string& name,
+                                   const std::string& library,
+                                   const std::string& package) {
+  return {name, nullptr, nullptr,
+          library + " was not found when herm-bench-rtt was built (apt-get "
+            "install " + package + ", then reconfigure)"};
+}
+
+/// Every transport, in the report's order: udp, herm, caf, zmq, dds.
+const std::vector<transport>& transports();
+/// nullptr when `name` is none of them.
+const transport* find_transport(const std::string& name);
 
 /// Fills `buf` (already sized) with a pattern that starts with `seq`, so a
 /// stale reply is recognised.
@@ -288,6 +312,48 @@ client_result run_oneway_batch_sender(const endpoint_params& p, SendSome send_so
     res.client_allocs = static_cast<double>(allocs_end - allocs_start)
                         / static_cast<double>(p.count);
   return res;
+}
+
+/// What one exchange of the round-trip loop came to.
+enum class round_trip {
+  /// The reply to this request arrived.
+  replied,
+  /// A warm-up reply was lost: the same request goes again, unmeasured.
+  resend,
+  /// The run ends; the exchange has set `res.error`.
+  failed,
+};
+
+/// The client's round-trip loop for blocking transports (udp, zmq, dds):
+/// `p.warmup` unmeasured round trips, then `p.count` measured ones whose
+/// times go to `res.rtt_ns`, with `p.gap` after each reply and the timed part
+/// (probes.hpp) around the measured ones. Before each request `payload` is
+/// filled by fill_payload with the request's sequence number;
+/// `exchange(seq)` sends it, waits for the reply with `seq` and says how that
+/// went (round_trip). The time between the calls' start and end is the round
+/// trip's. Memory: `p.count` times in `res.rtt_ns`, reserved up front.
+template <class Exchange>
+void run_round_trips(const endpoint_params& p, std::vector<uint8_t>& payload,
+                     client_result& res, Exchange exchange) {
+  res.rtt_ns.reserve(p.count);
+  for (uint32_t i = 0; i < p.warmup + p.count;) {
+    if (i == p.warmup)
+      timed_part_begins(); // once: a warm-up resend never reaches here at warmup
+    fill_payload(payload, i);
+    auto t0 = now_ns();
+    auto outcome = exchange(i);
+    auto t1 = now_ns();
+    if (outcome == round_trip::failed)
+      break;
+    if (outcome == round_trip::resend)
+      continue;
+    if (i >= p.warmup)
+      res.rtt_ns.push_back(t1 - t0);
+    ++i;
+    if (p.gap.count() > 0)
+      std::this_thread::sleep_for(p.gap);
+  }
+  timed_part_ends();
 }
 
 /// run_oneway_batch_sender with one message per send: `send_one(seq)` sends

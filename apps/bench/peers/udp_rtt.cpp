@@ -189,34 +189,24 @@ client_result udp_client(const endpoint_params& p) {
   if (p.mode == "oneway")
     return udp_oneway_client(fd, p);
   std::vector<uint8_t> out(p.size), in(p.size + 64);
-  res.rtt_ns.reserve(p.count);
-  for (uint32_t i = 0; i < p.warmup + p.count; ++i) {
-    if (i == p.warmup)
-      timed_part_begins();
-    fill_payload(out, i);
-    auto t0 = now_ns();
+  run_round_trips(p, out, res, [&](uint32_t seq) {
     if (::send(fd, out.data(), out.size(), 0) != static_cast<ssize_t>(out.size())) {
       res.error = errno_text("udp send");
-      return res;
+      return round_trip::failed;
     }
     ssize_t n;
     do {
       n = ::recv(fd, in.data(), in.size(), 0);
       // A late reply to an earlier request would be a bug in the server:
       // there is none, since every request waits for its reply.
-    } while (n >= 0 && payload_seq(in.data(), static_cast<size_t>(n)) != i);
-    auto t1 = now_ns();
+    } while (n >= 0 && payload_seq(in.data(), static_cast<size_t>(n)) != seq);
     if (n != static_cast<ssize_t>(out.size())) {
       res.error = n < 0 ? errno_text("udp recv")
                         : "udp reply of " + std::to_string(n) + " bytes";
-      return res;
+      return round_trip::failed;
     }
-    if (i >= p.warmup)
-      res.rtt_ns.push_back(t1 - t0);
-    if (p.gap.count() > 0)
-      std::this_thread::sleep_for(p.gap);
-  }
-  timed_part_ends();
+    return round_trip::replied;
+  });
   ::close(fd);
   return res;
 }

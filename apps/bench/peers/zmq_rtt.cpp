@@ -23,14 +23,6 @@ std::string zmq_text(const char* what) {
   return std::string{what} + ": " + zmq_strerror(zmq_errno());
 }
 
-} // namespace
-
-std::string zmq_unavailable() {
-  return {};
-}
-
-namespace {
-
 std::string last_port(void* sock) {
   char last[256] = {};
   size_t len = sizeof(last);
@@ -166,29 +158,19 @@ client_result zmq_client(const endpoint_params& p) {
     return res;
   }
   std::vector<uint8_t> out(p.size), in(p.size + 64);
-  res.rtt_ns.reserve(p.count);
-  for (uint32_t i = 0; i < p.warmup + p.count; ++i) {
-    if (i == p.warmup)
-      timed_part_begins();
-    fill_payload(out, i);
-    auto t0 = now_ns();
+  run_round_trips(p, out, res, [&](uint32_t seq) {
     if (zmq_send(sock, out.data(), out.size(), 0) < 0) {
       res.error = zmq_text("zmq_send");
-      break;
+      return round_trip::failed;
     }
     int n = zmq_recv(sock, in.data(), in.size(), 0);
-    auto t1 = now_ns();
-    if (n != static_cast<int>(out.size()) || payload_seq(in.data(), out.size()) != i) {
+    if (n != static_cast<int>(out.size()) || payload_seq(in.data(), out.size()) != seq) {
       res.error = n < 0 ? zmq_text("zmq_recv")
-                        : "zmq reply " + std::to_string(i) + " does not match";
-      break;
+                        : "zmq reply " + std::to_string(seq) + " does not match";
+      return round_trip::failed;
     }
-    if (i >= p.warmup)
-      res.rtt_ns.push_back(t1 - t0);
-    if (p.gap.count() > 0)
-      std::this_thread::sleep_for(p.gap);
-  }
-  timed_part_ends();
+    return round_trip::replied;
+  });
   zmq_close(sock);
   zmq_ctx_term(ctx);
   return res;
@@ -196,23 +178,4 @@ client_result zmq_client(const endpoint_params& p) {
 
 } // namespace herm::bench
 
-#else // no libzmq
-
-namespace herm::bench {
-
-std::string zmq_unavailable() {
-  return "libzmq was not found when herm-bench-rtt was built (apt-get install "
-         "libzmq3-dev, then reconfigure)";
-}
-
-int zmq_server(const endpoint_params&) {
-  return 1;
-}
-
-client_result zmq_client(const endpoint_params&) {
-  return {{}, zmq_unavailable()};
-}
-
-} // namespace herm::bench
-
-#endif
+#endif // HERM_BENCH_HAVE_ZMQ
