@@ -107,10 +107,9 @@ typedef struct hermc_can {
   uint32_t tx_id;          /* its identifier */
   uint8_t fmt, node;
   uint8_t tx_busy;         /* 1 while frames of tx_pkt remain */
-  uint8_t seq_used;
-  uint8_t seq_clock;
+  uint8_t seq_used;        /* entries of seqs in use, most recent first */
   struct {
-    uint8_t dst, lane, tag, last_use;
+    uint8_t dst, lane, tag;
   } seqs[HERMC_CAN_TX_SEQS];
   uint8_t tx_pkt[HERMC_MAX_PACKET];
 } hermc_can;

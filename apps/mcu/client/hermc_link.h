@@ -247,8 +247,9 @@ void hermc_link_rx_tick(hermc_link_rx* rx, uint32_t now_ms);
 /* -- serial link: sending ------------------------------------------------------------ */
 
 /** Upper bound of the wire bytes of a packet of `len` bytes at HERMC_MTU,
- *  leading delimiter included; what hermc_link_tx_packet needs free. 0 when
- *  len > HERMC_MAX_ANNOUNCED. */
+ *  leading delimiter included, whatever its bytes (for sizing HERMC_TX_RING:
+ *  in escaped mode every byte may double). 0 when len >
+ *  HERMC_MAX_ANNOUNCED. */
 size_t hermc_link_tx_wire_bound(size_t len, bool escaped);
 
 /** Transmit state of one serial line: the packet tag and a ring of
@@ -269,11 +270,14 @@ void hermc_link_tx_init(hermc_link_tx* tx, bool escaped);
 /** Fragments `pkt[0..len)` at HERMC_MTU, frames each (CRC-16, COBS, escapes)
  *  and appends the wire bytes to the ring; the packet buffer is free again
  *  on return. A leading 0x00 goes first when the ring was empty (the line
- *  idle, as far as the client knows). All or nothing: returns HERMC_OK, or
- *  HERMC_ERR_FULL when fewer than hermc_link_tx_wire_bound(len) bytes are
- *  free (drain and retry), HERMC_ERR_TOO_BIG when the bound exceeds
- *  HERMC_TX_RING (never fits); refusals are counted and do not advance the
- *  tag. len 0 sends the empty packet. O(len). */
+ *  idle, as far as the client knows). All or nothing: a first pass counts
+ *  the exact wire bytes, then returns HERMC_OK after queueing them, or
+ *  HERMC_ERR_FULL when they exceed hermc_link_tx_free (drain and retry),
+ *  HERMC_ERR_TOO_BIG when they exceed HERMC_TX_RING even with the ring
+ *  empty, or the packet exceeds HERMC_MAX_ANNOUNCED (never fits). Refusals
+ *  are counted (`refused`) and do not advance the tag. len 0 sends the
+ *  empty packet. O(len), twice (count, then write); stack: about
+ *  2 * HERMC_MTU + 30 bytes. */
 int hermc_link_tx_packet(hermc_link_tx* tx, const uint8_t* pkt, size_t len);
 
 /** Moves up to `cap` queued wire bytes into `out`, oldest first; returns
