@@ -18,9 +18,10 @@
  * recursion. All state is one `struct hermc_module` the application
  * allocates (statically: its size is sizeof(struct hermc_module), fixed by
  * the macros of hermc_config.h). One module is used from one context (the
- * main loop); no call is reentrant for one module, and handlers and
- * callbacks must not call hermc_feed, hermc_tick or hermc_poll_tx of the
- * same module (they may call hermc_request and hermc_publish).
+ * main loop); no call is reentrant for one module. An APO handler must
+ * call no hermc_ function of its module (its response is being built in
+ * the module's scratch buffer); a response callback may call hermc_request
+ * and hermc_publish, but not hermc_feed, hermc_tick or hermc_poll_tx.
  *
  * Bad input of any kind (bytes that do not frame, packets that do not
  * decode, APO messages for someone else, replies nobody asked for) is
@@ -113,7 +114,7 @@ struct hermc_apo {
   void *ctx;
 };
 
-struct hermc_remote {
+struct hermc_remote_slot {
   const char *name;   /* not owned */
   uint16_t module;    /* 0 while not discovered */
   uint32_t apo;
@@ -130,7 +131,7 @@ struct hermc_pending {
   void *ctx;
 };
 
-struct hermc_topic {
+struct hermc_topic_slot {
   const char *name;   /* not owned */
   uint32_t seq;
   uint8_t advertised;
@@ -206,10 +207,11 @@ struct hermc_module {
   uint32_t next_flood_id;
   uint64_t next_request_id;
   uint8_t napos, nremotes, ntopics;
+  uint8_t flood_next;       /* the ring's next slot in floods */
   struct hermc_apo apos[HERMC_MAX_APOS];
-  struct hermc_remote remotes[HERMC_MAX_REMOTES];
+  struct hermc_remote_slot remotes[HERMC_MAX_REMOTES];
   struct hermc_pending pending[HERMC_MAX_PENDING];
-  struct hermc_topic topics[HERMC_MAX_TOPICS];
+  struct hermc_topic_slot topics[HERMC_MAX_TOPICS];
   struct hermc_subscriber subscribers[HERMC_MAX_SUBSCRIBERS];
   struct hermc_flood floods[HERMC_FLOOD_CACHE];
   /* Scratch: one outgoing packet is built here, then framed into tx. */

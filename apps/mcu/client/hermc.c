@@ -1,0 +1,765 @@
+/* hermc.c: a leaf HERM module driven by the main loop (see hermc.h).
+ *
+ * What the C++ peers expect of a neighbour, and where this file meets it:
+ *   - routing/neighbour_table: a hello every interval makes us a neighbour;
+ *     1.5 silent intervals lose us. A hello with a new instance is a
+ *     restart.
+ *   - routing/route_table: our update (our id, our seqno, metric 0 in every
+ *     class, 0 hops: the receiver adds its own link cost, formula (1)) is
+ *     accepted from a neighbour only, so a hello goes out right before the
+ *     update we send on meeting a neighbour. A seqno request for our id
+ *     raises our seqno (RFC 8966 3.8.1.2) so that our route is feasible
+ *     again after a reboot.
+ *   - actors/app_support: queries are flooded broadcasts, answered by
+ *     unicast only when something matches; requests are answered with the
+ *     APO's payload or an error in category herm; subscriptions hold for
+ *     their lease.
+ */
+#include "hermc.h"
+
+#include "hermc_bytes.h"
+
+/* Our data packets' priority (app_support's prio_normal). */
+#define PRIORITY_NORMAL 2u
+/* Longest lease honoured (topic_table::max_lease). */
+#define MAX_LEASE_MS (24ul * 3600ul * 1000ul)
+
+/* True when time `t` has come at `now` (wrapping millisecond clock). */
+static int due(uint32_t now, uint32_t t) {
+  return (uint32_t)(now - t) < 0x80000000ul;
+}
+
+static size_t cstr_len(const char *s) {
+  size_t n = 0;
+  while (s[n] != '\0')
+    ++n;
+  return n;
+}
+
+static int bytes_equal(struct hermc_bytes b, const char *s) {
+  size_t i;
+  for (i = 0; i < b.size; ++i)
+    if (s[i] == '\0' || (uint8_t)s[i] != b.data[i])
+      return 0;
+  return s[b.size] == '\0';
+}
+
+/* -- sending ------------------------------------------------------------------ */
+
+/* Sends scratch[0..len) on the link. */
+static int send_scratch(struct hermc_module *m, size_t len) {
+  int rc = hermc_link_tx_packet(&m->tx, m->scratch, len);
+  if (rc != HERMC_OK) {
+    ++m->counters.tx_dropped;
+    return rc;
+  }
+  ++m->counters.tx_packets;
+  return HERMC_OK;
+}
+
+/* Where the APO message of a data packet to `dst` starts in scratch. */
+static size_t body_at(uint16_t dst, int flooded) {
+  return dst == HERMC_BROADCAST && flooded ? HERMC_FLOOD_HEADER_SIZE
+                                           : HERMC_DATA_HEADER_SIZE;
+}
+
+/* Writes the data header in front of the APO message of `body` bytes at
+ * scratch[body_at(dst, flooded)] and sends the packet. */
+static int send_data(struct hermc_module *m, uint16_t dst, int flooded,
+                     size_t body) {
+  struct hermc_data_header h;
+  size_t at = body_at(dst, flooded);
+  if (body == 0) {
+    ++m->counters.tx_dropped; /* the encoder found no room */
+    return HERMC_ERR_TOO_BIG;
+  }
+  h.src = m->cfg.module_id;
+  h.dst = dst;
+  h.hop_limit = HERMC_DEFAULT_HOP_LIMIT;
+  h.size_class = hermc_size_class_of(body);
+  h.priority = PRIORITY_NORMAL;
+  h.protocol = HERMC_PROTOCOL_ASL;
+  h.flood_id = 0;
+  h.authenticated = 0;
+  if (at == HERMC_FLOOD_HEADER_SIZE) {
+    h.flood_id = m->next_flood_id++;
+    if (m->next_flood_id == 0)
+      m->next_flood_id = 1;
+  }
+  (void)hermc_data_header_encode(&h, m->scratch, at);
+  return send_scratch(m, at + body);
+}
+
+/* Room for an APO message after a header of `at` bytes. */
+static size_t body_cap(size_t at) {
+  return (size_t)HERMC_MAX_PACKET - at;
+}
+
+static void send_hello(struct hermc_module *m, uint16_t interval_ms) {
+  struct hermc_hello h;
+  h.sender = m->cfg.module_id;
+  h.instance = m->cfg.instance;
+  h.seqno = m->hello_seqno++;
+  h.interval_ms = interval_ms;
+  if (send_scratch(m, hermc_hello_encode(&h, m->scratch, HERMC_MAX_PACKET))
+      == HERMC_OK)
+    ++m->counters.tx_hellos;
+}
+
+/* Our own route: metric 0 in every class, no hop (the neighbour adds its
+ * link's cost), as route_table::advertisement(self) does. */
+static void send_update(struct hermc_module *m) {
+  struct hermc_update_entry e;
+  uint8_t k;
+  e.origin = m->cfg.module_id;
+  e.seqno = m->own_seqno;
+  for (k = 0; k < HERMC_SIZE_CLASSES; ++k) {
+    e.metric[k] = 0;
+    e.hops[k] = 0;
+    e.path[k] = NULL;
+  }
+  if (send_scratch(m, hermc_update_encode(m->cfg.module_id, m->cfg.instance,
+                                          &e, 1, m->scratch,
+                                          HERMC_MAX_PACKET))
+      == HERMC_OK)
+    ++m->counters.tx_updates;
+}
+
+static void send_advertise(struct hermc_module *m, uint8_t t) {
+  size_t at = body_at(HERMC_BROADCAST, 1);
+  const char *name = m->topics[t].name;
+  if (send_data(m, HERMC_BROADCAST, 1,
+                hermc_asl_advertise_encode(name, cstr_len(name),
+                                           m->scratch + at, body_cap(at)))
+      == HERMC_OK)
+    m->topics[t].advertised = 1;
+}
+
+static void send_query(struct hermc_module *m, struct hermc_remote_slot *r) {
+  size_t at = body_at(HERMC_BROADCAST, 1);
+  r->query_id = m->next_query_id++;
+  (void)send_data(m, HERMC_BROADCAST, 1,
+                  hermc_asl_query_encode(r->query_id, HERMC_BY_NAME, r->name,
+                                         cstr_len(r->name), m->scratch + at,
+                                         body_cap(at)));
+}
+
+static void send_error(struct hermc_module *m, uint16_t dst, uint64_t rid,
+                       uint8_t code, const char *context) {
+  size_t at = body_at(dst, 0);
+  (void)send_data(m, dst, 0,
+                  hermc_asl_response_error_encode(
+                    rid, HERMC_ERROR_CATEGORY_HERM, code, context,
+                    cstr_len(context), m->scratch + at, body_cap(at)));
+}
+
+/* -- remote APOs ------------------------------------------------------------- */
+
+/* Forgets where remote `r` is and asks again now. */
+static void rediscover(struct hermc_module *m, struct hermc_remote_slot *r) {
+  r->module = HERMC_NO_MODULE;
+  r->apo = 0;
+  r->backoff_ms = m->cfg.discovery_min_ms;
+  r->next_query_ms = m->now_ms;
+}
+
+static void on_answer(struct hermc_module *m, uint16_t src,
+                      const struct hermc_asl_msg *a) {
+  uint8_t i;
+  for (i = 0; i < m->nremotes; ++i) {
+    struct hermc_remote_slot *r = &m->remotes[i];
+    struct hermc_asl_entry e;
+    size_t at = 0;
+    if (r->module != HERMC_NO_MODULE || r->query_id != a->id32)
+      continue;
+    while (hermc_asl_answer_entry(a, &at, &e))
+      if (bytes_equal(e.name, r->name)) {
+        r->module = src;
+        r->apo = e.apo;
+        break;
+      }
+  }
+}
+
+static void on_response(struct hermc_module *m, uint16_t src,
+                        const struct hermc_asl_msg *x) {
+  uint8_t i;
+  for (i = 0; i < HERMC_MAX_PENDING; ++i) {
+    struct hermc_pending p = m->pending[i];
+    struct hermc_remote_slot *r;
+    if (p.request_id != x->request_id || p.request_id == 0)
+      continue;
+    r = &m->remotes[p.remote];
+    if (r->module != src)
+      continue;
+    m->pending[i].request_id = 0;
+    ++m->counters.responses_received;
+    if (!x->ok && x->err_category == HERMC_ERROR_CATEGORY_HERM
+        && (x->err_code == HERMC_EC_APO_GONE
+            || x->err_code == HERMC_EC_NO_ROUTE
+            || x->err_code == HERMC_EC_UNAVAILABLE))
+      rediscover(m, r);
+    if (x->ok)
+      p.fn(p.ctx, HERMC_STATUS_OK, x->payload.data, x->payload.size, 0, 0);
+    else
+      p.fn(p.ctx, HERMC_STATUS_ERROR, NULL, 0, x->err_category, x->err_code);
+    return;
+  }
+  ++m->counters.rx_unexpected_response;
+}
+
+/* A remote APO withdrawn or down: find it again. */
+static void on_gone(struct hermc_module *m, uint16_t src, uint32_t apo) {
+  uint8_t i;
+  for (i = 0; i < m->nremotes; ++i)
+    if (m->remotes[i].module == src && m->remotes[i].apo == apo)
+      rediscover(m, &m->remotes[i]);
+}
+
+/* -- local APOs ------------------------------------------------------------- */
+
+static int apo_matches(const struct hermc_apo *a,
+                       const struct hermc_asl_msg *q) {
+  if (q->by == HERMC_BY_ANY)
+    return 1;
+  return bytes_equal(q->text, q->by == HERMC_BY_NAME ? a->name : a->type);
+}
+
+/* Answers a query with every matching APO, as many per answer as fit. */
+static void on_query(struct hermc_module *m, uint16_t src,
+                     const struct hermc_asl_msg *q) {
+  size_t at = body_at(src, 0);
+  size_t len = 0;
+  uint8_t i, count = 0;
+  for (i = 0; i < m->napos; ++i) {
+    const struct hermc_apo *a = &m->apos[i];
+    size_t n;
+    if (!apo_matches(a, q))
+      continue;
+    if (count == 0)
+      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(at));
+    n = hermc_asl_answer_entry_encode((uint32_t)i + 1u, a->name,
+                                      cstr_len(a->name), a->type,
+                                      cstr_len(a->type),
+                                      m->scratch + at + len,
+                                      body_cap(at) - len);
+    if (n == 0 && count > 0) {
+      /* Full: send what we have, start another answer with this APO. */
+      m->scratch[at + 6] = count;
+      (void)send_data(m, src, 0, len);
+      count = 0;
+      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(at));
+      n = hermc_asl_answer_entry_encode((uint32_t)i + 1u, a->name,
+                                        cstr_len(a->name), a->type,
+                                        cstr_len(a->type),
+                                        m->scratch + at + len,
+                                        body_cap(at) - len);
+    }
+    if (n == 0) {
+      ++m->counters.tx_dropped; /* one entry alone does not fit a packet */
+      continue;
+    }
+    len += n;
+    ++count;
+  }
+  if (count > 0) {
+    m->scratch[at + 6] = count;
+    if (send_data(m, src, 0, len) == HERMC_OK)
+      ++m->counters.queries_answered;
+  }
+}
+
+static void on_request(struct hermc_module *m, uint16_t src,
+                       const struct hermc_asl_msg *x) {
+  int reliable = x->kind == HERMC_ASL_RELIABLE_REQUEST;
+  size_t at = body_at(src, 0);
+  size_t resp_len = 0;
+  const struct hermc_apo *a;
+  uint8_t code;
+  if (x->id32 == 0 || x->id32 > m->napos) {
+    ++m->counters.rx_unknown_apo;
+    if (x->request_id != 0)
+      send_error(m, src, x->request_id, HERMC_EC_APO_GONE,
+                 "no such APO on the module");
+    return;
+  }
+  a = &m->apos[x->id32 - 1u];
+  ++m->counters.requests_served;
+  code = a->handler(a->ctx, x->payload.data, x->payload.size,
+                    m->scratch + at + 11u, body_cap(at) - 11u, &resp_len);
+  if (x->oneway) {
+    /* One-way: a reliable one is acknowledged, a plain one not at all.
+     * (No duplicate cache: a retransmitted copy reaches the handler again.) */
+    if (reliable)
+      (void)send_data(m, src, 0,
+                      hermc_asl_ack_encode(x->request_id, m->scratch + at,
+                                           body_cap(at)));
+    return;
+  }
+  if (code != 0) {
+    send_error(m, src, x->request_id, code, "the APO refused the request");
+    return;
+  }
+  if (resp_len > body_cap(at) - 11u) {
+    send_error(m, src, x->request_id, HERMC_EC_INVALID_PARAMETER,
+               "response too large for the module");
+    return;
+  }
+  (void)hermc_asl_response_ok_header(x->request_id, m->scratch + at, 11u);
+  (void)send_data(m, src, 0, 11u + resp_len);
+}
+
+/* -- topics -------------------------------------------------------------------- */
+
+static int find_topic(const struct hermc_module *m, struct hermc_bytes name) {
+  uint8_t t;
+  for (t = 0; t < m->ntopics; ++t)
+    if (bytes_equal(name, m->topics[t].name))
+      return t;
+  return -1;
+}
+
+static void on_subscribe(struct hermc_module *m, uint16_t src,
+                         const struct hermc_asl_msg *x, int subscribe) {
+  int t = find_topic(m, x->text);
+  uint8_t i;
+  struct hermc_subscriber *free_slot = NULL;
+  uint32_t lease = x->u32 < MAX_LEASE_MS ? x->u32 : MAX_LEASE_MS;
+  if (t < 0) {
+    ++m->counters.rx_asl_ignored; /* not a topic of ours */
+    return;
+  }
+  for (i = 0; i < HERMC_MAX_SUBSCRIBERS; ++i) {
+    struct hermc_subscriber *s = &m->subscribers[i];
+    if (s->module == HERMC_NO_MODULE) {
+      if (!free_slot)
+        free_slot = s;
+      continue;
+    }
+    if (s->module == src && s->topic == (uint8_t)t) {
+      if (subscribe)
+        s->lease_end_ms = m->now_ms + lease;
+      else
+        s->module = HERMC_NO_MODULE;
+      return;
+    }
+  }
+  if (!subscribe)
+    return;
+  if (!free_slot) {
+    ++m->counters.subscribers_refused;
+    return;
+  }
+  free_slot->module = src;
+  free_slot->topic = (uint8_t)t;
+  free_slot->lease_end_ms = m->now_ms + lease;
+}
+
+/* -- receiving ------------------------------------------------------------------ */
+
+static void on_asl(struct hermc_module *m, uint16_t src, const uint8_t *p,
+                   size_t n) {
+  struct hermc_asl_msg x;
+  if (hermc_asl_decode(p, n, &x) != HERMC_ASL_OK || src == HERMC_NO_MODULE
+      || src == HERMC_BROADCAST) {
+    ++m->counters.rx_asl_malformed;
+    return;
+  }
+  switch (x.kind) {
+    case HERMC_ASL_QUERY:
+      on_query(m, src, &x);
+      break;
+    case HERMC_ASL_ANSWER:
+      on_answer(m, src, &x);
+      break;
+    case HERMC_ASL_REQUEST:
+    case HERMC_ASL_RELIABLE_REQUEST:
+      on_request(m, src, &x);
+      break;
+    case HERMC_ASL_RESPONSE:
+      on_response(m, src, &x);
+      break;
+    case HERMC_ASL_SUBSCRIBE:
+      on_subscribe(m, src, &x, 1);
+      break;
+    case HERMC_ASL_UNSUBSCRIBE:
+      on_subscribe(m, src, &x, 0);
+      break;
+    case HERMC_ASL_DOWN:
+    case HERMC_ASL_WITHDRAW:
+      on_gone(m, src, x.id32);
+      break;
+    default:
+      ++m->counters.rx_asl_ignored;
+      break;
+  }
+}
+
+/* True if the flood (src, id) is new; remembers it. The cache is a ring:
+ * floods enter in time order, so the slot written next holds the oldest. */
+static int fresh_flood(struct hermc_module *m, uint16_t src, uint32_t id) {
+  uint8_t i;
+  struct hermc_flood *slot;
+  for (i = 0; i < HERMC_FLOOD_CACHE; ++i) {
+    const struct hermc_flood *f = &m->floods[i];
+    if (f->src == src && f->flood_id == id
+        && (uint32_t)(m->now_ms - f->seen_ms) < HERMC_FLOOD_MEMORY_MS)
+      return 0;
+  }
+  slot = &m->floods[m->flood_next];
+  m->flood_next = (uint8_t)((m->flood_next + 1u) % HERMC_FLOOD_CACHE);
+  if (slot->src != HERMC_NO_MODULE
+      && (uint32_t)(m->now_ms - slot->seen_ms) < HERMC_FLOOD_MEMORY_MS)
+    ++m->counters.flood_evictions;
+  slot->src = src;
+  slot->flood_id = id;
+  slot->seen_ms = m->now_ms;
+  return 1;
+}
+
+static void on_data(struct hermc_module *m, const uint8_t *p, size_t n) {
+  struct hermc_data_header h;
+  size_t at;
+  if (hermc_data_header_decode(p, n, &h, &at) != HERMC_NET_OK) {
+    ++m->counters.rx_malformed;
+    return;
+  }
+  if (h.authenticated) {
+    ++m->counters.rx_auth_unsupported;
+    return;
+  }
+  if (h.dst == HERMC_BROADCAST) {
+    if (h.flood_id != 0
+        && (h.src == m->cfg.module_id || !fresh_flood(m, h.src, h.flood_id))) {
+      ++m->counters.rx_flood_duplicates;
+      return;
+    }
+  } else if (h.dst != m->cfg.module_id) {
+    ++m->counters.rx_not_for_us;
+    return;
+  }
+  if (h.protocol != HERMC_PROTOCOL_ASL) {
+    ++m->counters.rx_ignored;
+    return;
+  }
+  on_asl(m, h.src, p + at, n - at);
+}
+
+static void meet_neighbour(struct hermc_module *m) {
+  uint8_t t;
+  ++m->counters.neighbour_changes;
+  /* It may not know us yet: a hello first, so that it takes our update. */
+  send_hello(m, m->cfg.hello_interval_ms);
+  send_update(m);
+  for (t = 0; t < m->ntopics; ++t)
+    send_advertise(m, t);
+}
+
+static void on_hello(struct hermc_module *m, const uint8_t *p, size_t n) {
+  struct hermc_hello h;
+  if (hermc_hello_decode(p, n, &h) != HERMC_NET_OK) {
+    ++m->counters.rx_malformed;
+    return;
+  }
+  if (h.interval_ms == 0) {
+    if (m->neighbour != HERMC_NO_MODULE && h.sender == m->neighbour
+        && h.instance == m->neighbour_instance)
+      m->neighbour = HERMC_NO_MODULE;
+    else
+      ++m->counters.rx_ignored;
+    return;
+  }
+  if (h.sender == HERMC_NO_MODULE || h.sender == HERMC_BROADCAST
+      || h.sender == m->cfg.module_id) {
+    ++m->counters.rx_ignored; /* claiming, or a duplicate of our id */
+    return;
+  }
+  {
+    int fresh = m->neighbour != h.sender
+                || m->neighbour_instance != h.instance;
+    m->neighbour = h.sender;
+    m->neighbour_instance = h.instance;
+    m->neighbour_heard_ms = m->now_ms;
+    m->neighbour_interval_ms = h.interval_ms;
+    if (fresh)
+      meet_neighbour(m);
+  }
+}
+
+static void on_seqno_request(struct hermc_module *m, const uint8_t *p,
+                             size_t n) {
+  struct hermc_seqno_request r;
+  if (hermc_seqno_request_decode(p, n, &r) != HERMC_NET_OK) {
+    ++m->counters.rx_malformed;
+    return;
+  }
+  if (r.origin != m->cfg.module_id) {
+    ++m->counters.rx_ignored; /* a leaf forwards nothing */
+    return;
+  }
+  if (hermc_seqno_newer(r.seqno, m->own_seqno))
+    m->own_seqno = r.seqno;
+  ++m->counters.seqno_requests_answered;
+  send_update(m);
+}
+
+void hermc_handle_packet(struct hermc_module *m, const uint8_t *p,
+                         size_t n) {
+  enum hermc_packet_type t;
+  ++m->counters.rx_packets;
+  if (hermc_peek_type(p, n, &t) != HERMC_NET_OK) {
+    ++m->counters.rx_malformed;
+    return;
+  }
+  switch (t) {
+    case HERMC_PT_DATA:
+      on_data(m, p, n);
+      break;
+    case HERMC_PT_HELLO:
+      on_hello(m, p, n);
+      break;
+    case HERMC_PT_UPDATE: {
+      /* Checked, not used: a leaf sends everything to its neighbour. */
+      struct hermc_update_header h;
+      if (hermc_update_decode(p, n, &h, NULL, 0) != HERMC_NET_OK)
+        ++m->counters.rx_malformed;
+      else
+        ++m->counters.rx_ignored;
+      break;
+    }
+    case HERMC_PT_SEQNO_REQUEST:
+      on_seqno_request(m, p, n);
+      break;
+    default:
+      ++m->counters.rx_ignored;
+      break;
+  }
+}
+
+static void on_link_packet(void *ctx, uint8_t src, const uint8_t *pkt,
+                           size_t len) {
+  (void)src;
+  hermc_handle_packet((struct hermc_module *)ctx, pkt, len);
+}
+
+/* -- public ---------------------------------------------------------------------- */
+
+void hermc_config_default(struct hermc_config *cfg, uint16_t id,
+                          uint64_t instance) {
+  cfg->module_id = id;
+  cfg->instance = instance;
+  cfg->hello_interval_ms = 1000u;
+  cfg->update_every = 4u;
+  cfg->request_timeout_ms = 2000u;
+  cfg->discovery_min_ms = 250u;
+  cfg->discovery_max_ms = 8000u;
+  cfg->escaped = 0;
+}
+
+int hermc_init(struct hermc_module *m, const struct hermc_config *cfg) {
+  size_t i;
+  uint8_t *raw = (uint8_t *)m;
+  if (cfg->module_id == HERMC_NO_MODULE || cfg->module_id == HERMC_BROADCAST
+      || cfg->instance == 0 || cfg->hello_interval_ms == 0
+      || cfg->update_every == 0)
+    return HERMC_ERR_ARG;
+  for (i = 0; i < sizeof *m; ++i)
+    raw[i] = 0;
+  m->cfg = *cfg;
+  if (m->cfg.discovery_min_ms == 0)
+    m->cfg.discovery_min_ms = 1;
+  hermc_link_rx_init(&m->rx, cfg->escaped != 0);
+  hermc_link_tx_init(&m->tx, cfg->escaped != 0);
+  /* Ids of this boot start from its instance, so that a reply to the
+   * previous boot's query or request is not taken for one of ours. */
+  m->next_flood_id = (uint32_t)cfg->instance | 1u;
+  m->next_query_id = (uint32_t)(cfg->instance >> 32);
+  m->next_request_id = (cfg->instance << 20) | 1u;
+  return HERMC_OK;
+}
+
+void hermc_feed(struct hermc_module *m, const uint8_t *bytes, size_t n) {
+  hermc_link_rx_feed(&m->rx, bytes, n, on_link_packet, m);
+}
+
+size_t hermc_poll_tx(struct hermc_module *m, uint8_t *out, size_t cap) {
+  return hermc_link_tx_pop(&m->tx, out, cap);
+}
+
+void hermc_tick(struct hermc_module *m, uint32_t now_ms) {
+  uint8_t i;
+  m->now_ms = now_ms;
+  hermc_link_rx_tick(&m->rx, now_ms);
+  if (!m->started) {
+    m->started = 1;
+    m->next_hello_ms = now_ms;
+    m->hellos_to_update = 1;
+    for (i = 0; i < m->nremotes; ++i)
+      m->remotes[i].next_query_ms = now_ms;
+  }
+  if (due(now_ms, m->next_hello_ms)) {
+    m->next_hello_ms = now_ms + m->cfg.hello_interval_ms;
+    send_hello(m, m->cfg.hello_interval_ms);
+    if (--m->hellos_to_update == 0) {
+      m->hellos_to_update = m->cfg.update_every;
+      send_update(m);
+    }
+  }
+  /* The neighbour is lost after 1.5 of its (or our longer) interval. */
+  if (m->neighbour != HERMC_NO_MODULE) {
+    uint32_t iv = m->neighbour_interval_ms > m->cfg.hello_interval_ms
+                    ? m->neighbour_interval_ms
+                    : m->cfg.hello_interval_ms;
+    if ((uint32_t)(now_ms - m->neighbour_heard_ms) > iv + iv / 2u)
+      m->neighbour = HERMC_NO_MODULE;
+  }
+  for (i = 0; i < m->nremotes; ++i) {
+    struct hermc_remote_slot *r = &m->remotes[i];
+    if (r->module != HERMC_NO_MODULE || !due(now_ms, r->next_query_ms))
+      continue;
+    send_query(m, r);
+    r->next_query_ms = now_ms + r->backoff_ms;
+    r->backoff_ms = r->backoff_ms < m->cfg.discovery_max_ms / 2u
+                      ? r->backoff_ms * 2u
+                      : m->cfg.discovery_max_ms;
+  }
+  for (i = 0; i < HERMC_MAX_PENDING; ++i) {
+    struct hermc_pending p = m->pending[i];
+    if (p.request_id == 0 || !due(now_ms, p.deadline_ms))
+      continue;
+    m->pending[i].request_id = 0;
+    ++m->counters.request_timeouts;
+    rediscover(m, &m->remotes[p.remote]);
+    p.fn(p.ctx, HERMC_STATUS_TIMEOUT, NULL, 0, 0, 0);
+  }
+  for (i = 0; i < HERMC_MAX_SUBSCRIBERS; ++i)
+    if (m->subscribers[i].module != HERMC_NO_MODULE
+        && due(now_ms, m->subscribers[i].lease_end_ms))
+      m->subscribers[i].module = HERMC_NO_MODULE;
+}
+
+int hermc_register_apo(struct hermc_module *m, const char *name,
+                       const char *type, hermc_handler handler, void *ctx) {
+  struct hermc_apo *a;
+  if (!handler || !name || !type || cstr_len(name) > HERMC_ASL_MAX_STRING
+      || cstr_len(type) > HERMC_ASL_MAX_STRING)
+    return HERMC_ERR_ARG;
+  if (m->napos >= HERMC_MAX_APOS)
+    return HERMC_ERR_NO_ROOM;
+  a = &m->apos[m->napos++];
+  a->name = name;
+  a->type = type;
+  a->handler = handler;
+  a->ctx = ctx;
+  return m->napos;
+}
+
+int hermc_remote(struct hermc_module *m, const char *name) {
+  struct hermc_remote_slot *r;
+  if (!name || cstr_len(name) > HERMC_ASL_MAX_STRING)
+    return HERMC_ERR_ARG;
+  if (m->nremotes >= HERMC_MAX_REMOTES)
+    return HERMC_ERR_NO_ROOM;
+  r = &m->remotes[m->nremotes];
+  r->name = name;
+  rediscover(m, r);
+  return m->nremotes++;
+}
+
+int hermc_remote_ready(const struct hermc_module *m, int r) {
+  return r >= 0 && r < m->nremotes
+         && m->remotes[r].module != HERMC_NO_MODULE;
+}
+
+int hermc_request(struct hermc_module *m, int r, const uint8_t *payload,
+                  size_t len, hermc_response_fn fn, void *ctx,
+                  uint32_t timeout_ms) {
+  struct hermc_remote_slot *rem;
+  struct hermc_pending *slot = NULL;
+  uint64_t rid = 0;
+  size_t at, i;
+  int rc;
+  if (r < 0 || r >= m->nremotes || (len > 0 && !payload))
+    return HERMC_ERR_ARG;
+  rem = &m->remotes[r];
+  if (rem->module == HERMC_NO_MODULE) {
+    ++m->counters.requests_refused;
+    return HERMC_ERR_NOT_READY;
+  }
+  at = body_at(rem->module, 0);
+  if (len > body_cap(at) - 14u)
+    return HERMC_ERR_TOO_BIG;
+  if (fn) {
+    for (i = 0; i < HERMC_MAX_PENDING && !slot; ++i)
+      if (m->pending[i].request_id == 0)
+        slot = &m->pending[i];
+    if (!slot) {
+      ++m->counters.requests_refused;
+      return HERMC_ERR_NO_ROOM;
+    }
+    rid = m->next_request_id++;
+    if (m->next_request_id == 0)
+      m->next_request_id = 1;
+  }
+  (void)hermc_asl_request_header(rid, rem->apo, 0, fn == NULL,
+                                 m->scratch + at, 14u);
+  for (i = 0; i < len; ++i)
+    m->scratch[at + 14u + i] = payload[i];
+  rc = send_data(m, rem->module, 0, 14u + len);
+  if (rc != HERMC_OK || !slot)
+    return rc;
+  slot->request_id = rid;
+  slot->deadline_ms = m->now_ms
+                      + (timeout_ms ? timeout_ms : m->cfg.request_timeout_ms);
+  slot->remote = (uint8_t)r;
+  slot->fn = fn;
+  slot->ctx = ctx;
+  return HERMC_OK;
+}
+
+int hermc_topic(struct hermc_module *m, const char *name) {
+  struct hermc_topic_slot *t;
+  if (!name || cstr_len(name) == 0 || cstr_len(name) > HERMC_ASL_MAX_STRING)
+    return HERMC_ERR_ARG;
+  if (m->ntopics >= HERMC_MAX_TOPICS)
+    return HERMC_ERR_NO_ROOM;
+  t = &m->topics[m->ntopics];
+  t->name = name;
+  t->seq = 0;
+  t->advertised = 0;
+  if (m->neighbour != HERMC_NO_MODULE)
+    send_advertise(m, m->ntopics);
+  return m->ntopics++;
+}
+
+int hermc_publish(struct hermc_module *m, int t, const uint8_t *payload,
+                  size_t len) {
+  struct hermc_topic_slot *topic;
+  const char *name;
+  size_t name_len, i, k;
+  int sent = 0;
+  if (t < 0 || t >= m->ntopics || (len > 0 && !payload))
+    return HERMC_ERR_ARG;
+  topic = &m->topics[t];
+  name = topic->name;
+  name_len = cstr_len(name);
+  if (7u + name_len + len > body_cap(HERMC_DATA_HEADER_SIZE))
+    return HERMC_ERR_TOO_BIG;
+  ++topic->seq;
+  for (i = 0; i < HERMC_MAX_SUBSCRIBERS; ++i) {
+    const struct hermc_subscriber *s = &m->subscribers[i];
+    size_t at, h;
+    if (s->module == HERMC_NO_MODULE || s->topic != (uint8_t)t)
+      continue;
+    at = body_at(s->module, 0);
+    h = hermc_asl_publish_header(name, name_len, topic->seq, m->scratch + at,
+                                 body_cap(at));
+    for (k = 0; k < len; ++k)
+      m->scratch[at + h + k] = payload[k];
+    if (send_data(m, s->module, 0, h + len) == HERMC_OK) {
+      ++m->counters.publications_sent;
+      ++sent;
+    }
+  }
+  return sent;
+}
