@@ -1,0 +1,140 @@
+/* The sonar board's firmware: the ATmega128 with its SRF04 as a HERM module
+ * of its own on RS232C (UART0, 19,200 baud), a leaf that sends every reading
+ * to the sensor module's `sonar` APO (docs/mcu.md, "The SRF04 board").
+ *
+ * Every SRF04_PERIOD_MS the board measures; each reading goes as a request
+ * whose payload is one element `herm.srf04_reading` (seq:u16,
+ * distance_mm:u16, echo_us:u32) to the APO named SRF04_TARGET_APO, found by
+ * hermc's discovery. A reading taken while `sonar` is not discovered yet, or
+ * while every pending slot is busy, is not sent and is counted
+ * (readings_unsent); the sequence number still advances, so the receiver
+ * sees the gap.
+ *
+ * Module id: SRF04_MODULE_ID (static, the board never claims one).
+ * Instance: a boot counter in EEPROM (bytes 0..3), so a neighbour tells a
+ * rebooted board from a live one. */
+#include <avr/eeprom.h>
+#include <avr/interrupt.h>
+#include <avr/sleep.h>
+#include <stdint.h>
+
+#include "clock.h"
+#include "hermc.h"
+#include "hermc_payload.h"
+#include "srf04.h"
+#include "uart0.h"
+
+#ifndef SRF04_MODULE_ID
+#define SRF04_MODULE_ID 0x0A04u
+#endif
+#ifndef SRF04_PERIOD_MS
+#define SRF04_PERIOD_MS 100u /* tests; the paper's testbed measures every 30 s */
+#endif
+#ifndef SRF04_TARGET_APO
+#define SRF04_TARGET_APO "sonar"
+#endif
+#define SRF04_READING_TYPE "herm.srf04_reading"
+
+/* What the board counts besides hermc's and the drivers' counters (kept
+ * for a debugger or a future status APO). */
+struct board_counters {
+  uint16_t readings;
+  uint16_t readings_unsent;
+  uint16_t responses_ok;
+  uint16_t responses_failed;
+};
+
+static struct hermc_module module;
+static struct board_counters counters;
+
+static uint64_t boot_instance(void) {
+  uint32_t *const at = (uint32_t *)0;
+  uint32_t boots = eeprom_read_dword(at) + 1u;
+  if (boots == 0u || boots == 0xFFFFFFFFu) /* erased EEPROM reads 0xFF.. */
+    boots = 1u;
+  eeprom_write_dword(at, boots);
+  return ((uint64_t)boots << 16) | SRF04_MODULE_ID;
+}
+
+static void on_response(void *ctx, enum hermc_status status,
+                        const uint8_t *payload, size_t len,
+                        uint64_t err_category, uint8_t err_code) {
+  (void)ctx;
+  (void)payload;
+  (void)len;
+  (void)err_category;
+  (void)err_code;
+  if (status == HERMC_STATUS_OK)
+    counters.responses_ok++;
+  else
+    counters.responses_failed++;
+}
+
+static void send_reading(int sonar, uint16_t seq, const srf04_measurement_t *m) {
+  uint8_t payload[40];
+  struct hermc_pw w;
+  hermc_pw_begin(&w, payload, sizeof(payload), 1u);
+  hermc_pw_element(&w, SRF04_READING_TYPE);
+  hermc_pw_u16(&w, seq);
+  hermc_pw_u16(&w, m->distance_mm);
+  hermc_pw_u32(&w, m->echo_us);
+  size_t len = hermc_pw_finish(&w);
+  counters.readings++;
+  if (len == 0u ||
+      hermc_request(&module, sonar, payload, len, on_response, NULL, 0u) != HERMC_OK)
+    counters.readings_unsent++;
+}
+
+/* Moves what the module has to send into UART0's transmit ring. */
+static void drain_tx(void) {
+  uint8_t chunk[16];
+  for (;;) {
+    uint8_t room = uart0_tx_free();
+    if (room == 0u)
+      return;
+    size_t n = hermc_poll_tx(&module, chunk, room < sizeof(chunk) ? room : sizeof(chunk));
+    if (n == 0u)
+      return;
+    for (size_t i = 0; i < n; i++)
+      uart0_write(chunk[i]);
+  }
+}
+
+int main(void) {
+  cli();
+  clock_init();
+  uart0_init();
+  srf04_init();
+  set_sleep_mode(SLEEP_MODE_IDLE);
+
+  struct hermc_config cfg;
+  hermc_config_default(&cfg, SRF04_MODULE_ID, boot_instance());
+  if (hermc_init(&module, &cfg) != HERMC_OK) {
+    for (;;) /* a configuration error is a build error: stop here */
+      sleep_mode();
+  }
+  int sonar = hermc_remote(&module, SRF04_TARGET_APO);
+  sei();
+
+  uint16_t seq = 0;
+  uint32_t last = clock_ms();
+  for (;;) {
+    uint8_t byte;
+    while (uart0_read(&byte))
+      hermc_feed(&module, &byte, 1u);
+    uint32_t now = clock_ms();
+    hermc_tick(&module, now);
+    if ((uint32_t)(now - last) >= SRF04_PERIOD_MS && srf04_trigger(now))
+      last = now;
+    srf04_measurement_t m;
+    if (srf04_poll(clock_ms(), &m) == SRF04_READY)
+      send_reading(sonar, ++seq, &m);
+    drain_tx();
+    /* Every event comes with an interrupt (the 1 ms tick at least). */
+    cli();
+    sleep_enable();
+    sei();
+    sleep_cpu();
+    sleep_disable();
+  }
+}
