@@ -146,6 +146,81 @@ void ensure_bound(Self* self, binding<T>& b, const app_support_actor& apps,
       });
 }
 
+/// What the log calls a message an APO sends to its target, and what it
+/// holds.
+std::string label(const sonar_batch& b) {
+  return "sonar batch " + std::to_string(b.batch);
+}
+std::string contents(const sonar_batch& b) {
+  return std::to_string(b.distances_mm.size()) + " readings";
+}
+std::string label(const vision_frame& f) {
+  return "vision frame " + std::to_string(f.seq);
+}
+std::string contents(const vision_frame& f) {
+  return std::to_string(f.data.size()) + " bytes";
+}
+
+// The three below serve every APO that sends to a target bound by name:
+// `Self` is its stateful actor; the state has apo_name, opt.target,
+// ack_timeout() and the binding `target`.
+
+/// Requests `x` from the bound target: logs the send, then its
+/// acknowledgement with the time it took, or its failure.
+template <class Self, class T>
+void request_target(Self* self, T x) {
+  auto& st = self->state;
+  auto what = label(x);
+  auto t0 = std::chrono::steady_clock::now();
+  spdlog::info("{}: {} ({}) -> '{}'", st.apo_name, what, contents(x),
+               st.opt.target);
+  self->request(st.target.proxy, st.ack_timeout(), std::move(x))
+    .then(
+      [self, what, t0](uint32_t) {
+        auto us = std::chrono::duration_cast<std::chrono::microseconds>(
+                    std::chrono::steady_clock::now() - t0)
+                    .count();
+        spdlog::info("{}: {} acknowledged ({:.1f} ms)", self->state.apo_name,
+                     what, us / 1000.0);
+      },
+      [self, what](caf::error& err) {
+        spdlog::warn("{}: {} failed: {}", self->state.apo_name, what,
+                     describe(err));
+      });
+}
+
+/// Binds the target unless bound or binding already; once bound, requests
+/// what was held, oldest first.
+template <class Self>
+void bind_target(Self* self) {
+  auto& st = self->state;
+  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target, [self] {
+    self->state.target.release(
+      [self](auto x) { request_target(self, std::move(x)); });
+  });
+}
+
+/// Requests `x` from the target when bound; otherwise binds and holds `x`
+/// until then, or drops it (counted) when the hold is full. Logs which.
+template <class Self, class T>
+void send_to_target(Self* self, T x) {
+  auto& st = self->state;
+  bind_target(self);
+  if (st.target.proxy) {
+    request_target(self, std::move(x));
+    return;
+  }
+  auto what = label(x);
+  if (st.target.hold(std::move(x)))
+    spdlog::info("{}: {} held until '{}' is bound ({} held)", st.apo_name,
+                 what, st.opt.target, st.target.held.size());
+  else
+    spdlog::warn("{}: {} dropped: '{}' not bound yet and {} held already ({} "
+                 "dropped so far)",
+                 st.apo_name, what, st.opt.target, st.target.held.size(),
+                 st.target.refused);
+}
+
 // -- collector ---------------------------------------------------------------------
 
 struct collector_state {
@@ -197,6 +272,10 @@ struct sonar_state {
   uint64_t malformed = 0;
   channel_actor line;
   binding<sonar_batch> target;
+
+  std::chrono::milliseconds ack_timeout() const {
+    return 10s;
+  }
 };
 
 using sonar_actor = caf::stateful_actor<sonar_state>;
@@ -230,11 +309,16 @@ void open_sensor_line(sonar_actor* self) {
   device_config dev{dev_name, "serial", st.opt.device,
                     {{"baud", std::to_string(st.opt.baud)}}};
   auto io = st.ctx.module.io;
+  auto failed = [self](caf::error& err) {
+    spdlog::warn("{}: cannot open the sensor line: {}", self->state.apo_name,
+                 render(err));
+    retry_sensor_line(self);
+  };
   // Forget an earlier attempt's device (absent the first time).
   self->request(io, 5s, atom::close_v, dev_name).then([] {}, [](caf::error&) {});
   self->request(io, 5s, atom::add_v, dev)
     .then(
-      [self, io, dev_name](device_info&) {
+      [self, io, dev_name, failed](device_info&) {
         self->request(io, 5s, atom::open_v,
                       channel_request{dev_name, "*", false, true})
           .then(
@@ -247,68 +331,16 @@ void open_sensor_line(sonar_actor* self) {
                            self->state.apo_name, self->state.opt.device,
                            self->state.opt.baud, info.profile.mtu);
             },
-            [self](caf::error& err) {
-              spdlog::warn("{}: cannot open the sensor line: {}",
-                           self->state.apo_name, render(err));
-              retry_sensor_line(self);
-            });
+            failed);
       },
-      [self](caf::error& err) {
-        spdlog::warn("{}: cannot open the sensor line: {}", self->state.apo_name,
-                     render(err));
-        retry_sensor_line(self);
-      });
-}
-
-void request_batch(sonar_actor* self, sonar_batch b);
-
-void bind_target(sonar_actor* self) {
-  auto& st = self->state;
-  ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target, [self] {
-    self->state.target.release(
-      [self](sonar_batch b) { request_batch(self, std::move(b)); });
-  });
+      failed);
 }
 
 void send_batch(sonar_actor* self) {
   auto& st = self->state;
   sonar_batch b{st.ctx.module_name, ++st.batches, st.first_seq, std::move(st.readings)};
   st.readings.clear();
-  bind_target(self);
-  if (!st.target.proxy) {
-    auto n = b.batch;
-    if (st.target.hold(std::move(b)))
-      spdlog::info("{}: sonar batch {} held until '{}' is bound ({} held)",
-                   st.apo_name, n, st.opt.target, st.target.held.size());
-    else
-      spdlog::warn("{}: sonar batch {} dropped: '{}' not bound yet and {} "
-                   "batches held already ({} dropped so far)",
-                   st.apo_name, n, st.opt.target, st.target.held.size(),
-                   st.target.refused);
-    return;
-  }
-  request_batch(self, std::move(b));
-}
-
-void request_batch(sonar_actor* self, sonar_batch b) {
-  auto& st = self->state;
-  auto t0 = std::chrono::steady_clock::now();
-  auto n = b.batch;
-  spdlog::info("{}: sonar batch {} ({} readings) -> '{}'", st.apo_name, n,
-               b.distances_mm.size(), st.opt.target);
-  self->request(st.target.proxy, 10s, std::move(b))
-    .then(
-      [self, n, t0](uint32_t) {
-        auto us = std::chrono::duration_cast<std::chrono::microseconds>(
-                    std::chrono::steady_clock::now() - t0)
-                    .count();
-        spdlog::info("{}: sonar batch {} acknowledged ({:.1f} ms)",
-                     self->state.apo_name, n, us / 1000.0);
-      },
-      [self, n](caf::error& err) {
-        spdlog::warn("{}: sonar batch {} failed: {}", self->state.apo_name, n,
-                     describe(err));
-      });
+  send_to_target(self, std::move(b));
 }
 
 caf::behavior srf04_batcher(sonar_actor* self, apo_context ctx,
@@ -372,6 +404,11 @@ struct vision_state {
   std::string apo_name;
   uint32_t seq = 0;
   binding<vision_frame> target;
+
+  /// A frame not acknowledged before the next one is due has failed.
+  std::chrono::milliseconds ack_timeout() const {
+    return std::chrono::milliseconds(opt.period_ms);
+  }
 };
 
 using vision_actor = caf::stateful_actor<vision_state>;
@@ -388,34 +425,6 @@ caf::expected<vision_options> vision_opts(const apo_config& cfg) {
   return o;
 }
 
-void request_frame(vision_actor* self, vision_frame f) {
-  auto& st = self->state;
-  auto seq = f.seq;
-  auto t0 = std::chrono::steady_clock::now();
-  spdlog::info("{}: vision frame {} ({} bytes) -> '{}'", st.apo_name, seq,
-               f.data.size(), st.opt.target);
-  self->request(st.target.proxy, std::chrono::milliseconds(st.opt.period_ms),
-                std::move(f))
-    .then(
-      [self, seq, t0](uint32_t) {
-        auto us = std::chrono::duration_cast<std::chrono::microseconds>(
-                    std::chrono::steady_clock::now() - t0)
-                    .count();
-        spdlog::info("{}: vision frame {} acknowledged ({:.1f} ms)",
-                     self->state.apo_name, seq, us / 1000.0);
-      },
-      [self, seq](caf::error& err) {
-        spdlog::warn("{}: vision frame {} failed: {}", self->state.apo_name,
-                     seq, describe(err));
-      });
-}
-
-/// Sends what was held while the binding was being made.
-void flush_frames(vision_actor* self) {
-  self->state.target.release(
-    [self](vision_frame f) { request_frame(self, std::move(f)); });
-}
-
 caf::behavior vision_source(vision_actor* self, apo_context ctx,
                             vision_options opt, std::string apo_name) {
   auto& init = self->state;
@@ -423,8 +432,7 @@ caf::behavior vision_source(vision_actor* self, apo_context ctx,
   init.opt = std::move(opt);
   init.apo_name = std::move(apo_name);
   self->set_default_handler(log_unexpected);
-  ensure_bound(self, init.target, init.ctx.module.apps, init.opt.target,
-               [self] { flush_frames(self); });
+  bind_target(self);
   self->delayed_send(self, std::chrono::milliseconds(init.opt.period_ms),
                      atom::tick_v);
   return {
@@ -436,20 +444,7 @@ caf::behavior vision_source(vision_actor* self, apo_context ctx,
       vision_frame f{st.ctx.module_name, seq, std::vector<uint8_t>(st.opt.bytes)};
       for (size_t i = 0; i < f.data.size(); ++i)
         f.data[i] = static_cast<uint8_t>(seq + i);
-      ensure_bound(self, st.target, st.ctx.module.apps, st.opt.target,
-                   [self] { flush_frames(self); });
-      if (!st.target.proxy) {
-        if (st.target.hold(std::move(f)))
-          spdlog::info("{}: vision frame {} held until '{}' is bound",
-                       st.apo_name, seq, st.opt.target);
-        else
-          spdlog::warn("{}: vision frame {} dropped: '{}' not bound yet and "
-                       "{} frames held already ({} dropped so far)",
-                       st.apo_name, seq, st.opt.target, st.target.held.size(),
-                       st.target.refused);
-        return;
-      }
-      request_frame(self, std::move(f));
+      send_to_target(self, std::move(f));
     },
   };
 }
@@ -473,6 +468,27 @@ caf::behavior echo(caf::event_based_actor* self) {
 
 // -- the registry ------------------------------------------------------------------
 
+/// A kind whose options `parse` reads (check runs it, spawn runs it again)
+/// and whose APO runs `fun` with them and its configured name.
+template <class Options, class Actor>
+apo_kind kind_with_options(std::string name, std::string description,
+                           caf::expected<Options> (*parse)(const apo_config&),
+                           caf::behavior (*fun)(Actor*, apo_context, Options,
+                                                std::string)) {
+  return {std::move(name), std::move(description),
+          [parse](const apo_config& cfg) -> caf::error {
+            auto o = parse(cfg);
+            return o ? caf::error{} : o.error();
+          },
+          [parse, fun](const apo_context& ctx,
+                       const apo_config& cfg) -> caf::expected<caf::actor> {
+            auto o = parse(cfg);
+            if (!o)
+              return o.error();
+            return ctx.sys->spawn(fun, ctx, *o, cfg.name);
+          }};
+}
+
 std::vector<apo_kind> make_kinds() {
   std::vector<apo_kind> kinds;
   kinds.push_back(
@@ -483,33 +499,15 @@ std::vector<apo_kind> make_kinds() {
      [](const apo_context& ctx, const apo_config&) -> caf::expected<caf::actor> {
        return ctx.sys->spawn(collector);
      }});
-  kinds.push_back(
-    {"srf04_batcher",
-     "reads an SRF04 ultrasonic board on a serial line (options: device, baud, "
-     "batch, target) and sends every `batch` readings to the APO `target`",
-     [](const apo_config& cfg) -> caf::error {
-       auto o = sonar_opts(cfg);
-       return o ? caf::error{} : o.error();
-     },
-     [](const apo_context& ctx, const apo_config& cfg) -> caf::expected<caf::actor> {
-       auto o = sonar_opts(cfg);
-       if (!o)
-         return o.error();
-       return ctx.sys->spawn(srf04_batcher, ctx, *o, cfg.name);
-     }});
-  kinds.push_back(
-    {"vision_source",
-     "sends `bytes` bytes of vision data every `period_ms` to the APO `target`",
-     [](const apo_config& cfg) -> caf::error {
-       auto o = vision_opts(cfg);
-       return o ? caf::error{} : o.error();
-     },
-     [](const apo_context& ctx, const apo_config& cfg) -> caf::expected<caf::actor> {
-       auto o = vision_opts(cfg);
-       if (!o)
-         return o.error();
-       return ctx.sys->spawn(vision_source, ctx, *o, cfg.name);
-     }});
+  kinds.push_back(kind_with_options(
+    "srf04_batcher",
+    "reads an SRF04 ultrasonic board on a serial line (options: device, baud, "
+    "batch, target) and sends every `batch` readings to the APO `target`",
+    sonar_opts, srf04_batcher));
+  kinds.push_back(kind_with_options(
+    "vision_source",
+    "sends `bytes` bytes of vision data every `period_ms` to the APO `target`",
+    vision_opts, vision_source));
   kinds.push_back({"echo", "answers every request with the request itself",
                    [](const apo_config& cfg) { return only_options(cfg, {}); },
                    [](const apo_context& ctx,
