@@ -1,6 +1,7 @@
 // Pieces the link benchmarks (bench_can_efficiency, bench_emu_bandwidth,
 // bench_serial_goodput) share: a monotonic clock in nanoseconds, a scratch
-// directory for emulated media, and a frame handler that ignores everything.
+// directory for emulated media, opening the sending and the receiving
+// station, and a frame handler that ignores everything.
 // Header-only; every function is safe to call from any thread.
 
 #pragma once
@@ -9,10 +10,14 @@
 #include <cstdint>
 #include <cstdio>
 #include <ftw.h>
+#include <optional>
 #include <stdlib.h>
 #include <string>
 
+#include <benchmark/benchmark.h>
+
 #include "channels/drivers/posix.hpp"
+#include "channels/error.hpp"
 #include "channels/link_driver.hpp"
 
 namespace herm::bench {
@@ -50,9 +55,37 @@ public:
     return path_;
   }
 
+  /// False, after skipping the benchmark, when mkdtemp failed.
+  bool usable(benchmark::State& state) const {
+    if (path_.empty())
+      state.SkipWithError("mkdtemp failed");
+    return !path_.empty();
+  }
+
 private:
   std::string path_;
 };
+
+/// The two stations of a link benchmark.
+struct station_pair {
+  link_driver_ptr tx;
+  link_driver_ptr rx;
+};
+
+/// Opens the sending station from `tx_cfg`, then the receiving one from
+/// `rx_cfg` (each config names its link kind, which must be known). Nothing,
+/// after skipping the benchmark with the first error, when either fails.
+inline std::optional<station_pair> open_stations(benchmark::State& state,
+                                                 const device_config& tx_cfg,
+                                                 const device_config& rx_cfg) {
+  auto tx = find_link_kind(tx_cfg.kind)->open(tx_cfg);
+  auto rx = tx ? find_link_kind(rx_cfg.kind)->open(rx_cfg) : tx;
+  if (!tx || !rx) {
+    state.SkipWithError(render(tx ? rx.error() : tx.error()).c_str());
+    return std::nullopt;
+  }
+  return station_pair{std::move(*tx), std::move(*rx)};
+}
 
 /// A frame handler that ignores every callback: the sending station's, and
 /// the base of counters that override only what they count.

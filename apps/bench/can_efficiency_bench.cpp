@@ -112,12 +112,8 @@ void can_efficiency(benchmark::State& state, const char* id_format,
   // About half a second of bus time per iteration.
   auto packets = static_cast<uint64_t>(state.range(1));
   bench::scratch_dir dir{"herm-can-bench"};
-  if (dir.path().empty()) {
-    state.SkipWithError("mkdtemp failed");
+  if (!dir.usable(state))
     return;
-  }
-  const auto& root = dir.path();
-  auto* kind = find_link_kind("can");
   option_map common{{"id_format", id_format},
                     {"stuffing", stuffing ? "true" : "false"},
                     {"bitrate", "1000000"}};
@@ -125,17 +121,17 @@ void can_efficiency(benchmark::State& state, const char* id_format,
   tx_opts["node"] = "1";
   auto rx_opts = common;
   rx_opts["node"] = "2";
-  auto bus = "emu:" + root + "/bus";
-  auto tx = kind->open(device_config{"tx0", "can", bus, tx_opts});
-  auto rx = tx ? kind->open(device_config{"rx0", "can", bus, rx_opts}) : tx;
-  if (!tx || !rx) {
-    state.SkipWithError(render(tx ? rx.error() : tx.error()).c_str());
+  auto bus = "emu:" + dir.path() + "/bus";
+  auto stations = bench::open_stations(state, {"tx0", "can", bus, tx_opts},
+                                       {"rx0", "can", bus, rx_opts});
+  if (!stations)
     return;
-  }
-  auto rx_port = make_port(*rx, reassembly_limits{});
+  auto tx = stations->tx;
+  auto rx = stations->rx;
+  auto rx_port = make_port(rx, reassembly_limits{});
   // The channel queues frames when the driver's queue is full; so does this
   // writer, by waiting a few frame times.
-  auto tx_driver = *tx;
+  auto tx_driver = tx;
   frame_writer writer = [tx_driver](link_addr dst, uint8_t prio,
                                     const uint8_t* data, size_t size) {
     for (;;) {
@@ -145,14 +141,14 @@ void can_efficiency(benchmark::State& state, const char* id_format,
       std::this_thread::sleep_for(500us);
     }
   };
-  auto tx_port = make_port(*tx, reassembly_limits{}, writer);
+  auto tx_port = make_port(tx, reassembly_limits{}, writer);
   if (!rx_port || !tx_port) {
     state.SkipWithError("make_port failed");
     return;
   }
   auto counter = std::make_shared<packet_counter>(std::move(*rx_port));
-  (*rx)->start(counter);
-  (*tx)->start(std::make_shared<bench::ignoring_handler>());
+  rx->start(counter);
+  tx->start(std::make_shared<bench::ignoring_handler>());
   auto format = std::string{id_format} == "11bit" ? can::id_format::std11
                                                    : can::id_format::ext29;
   auto full_frame_ns = can::bits_time_ns(can::frame_bits(format, 8, stuffing),
@@ -192,8 +188,8 @@ void can_efficiency(benchmark::State& state, const char* id_format,
     delivered += counter->packets();
     bytes += counter->bytes();
   }
-  (*tx)->stop();
-  (*rx)->stop();
+  tx->stop();
+  rx->stop();
   if (frames == 0 || seconds <= 0)
     return;
   // Exact bus bits of one packet: its frames, replayed through a fragmenter.

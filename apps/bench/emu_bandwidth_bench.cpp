@@ -84,30 +84,25 @@ private:
 void emu_bandwidth(benchmark::State& state, const char* profile,
                    double burst_seconds, const char* bandwidth = nullptr) {
   bench::scratch_dir dir{"herm-emu-bench"};
-  if (dir.path().empty()) {
-    state.SkipWithError("mkdtemp failed");
+  if (!dir.usable(state))
     return;
-  }
-  const auto& root = dir.path();
-  auto* kind = find_link_kind("emu");
-  device_config tx_cfg{"tx0", "emu", root + "/medium",
+  device_config tx_cfg{"tx0", "emu", dir.path() + "/medium",
                        {{"profile", profile}, {"station", "1"}}};
-  device_config rx_cfg{"rx0", "emu", root + "/medium",
+  device_config rx_cfg{"rx0", "emu", dir.path() + "/medium",
                        {{"profile", profile}, {"station", "2"}}};
   if (bandwidth != nullptr) {
     tx_cfg.options["bandwidth"] = bandwidth;
     rx_cfg.options["bandwidth"] = bandwidth;
   }
-  auto tx = kind->open(tx_cfg);
-  auto rx = tx ? kind->open(rx_cfg) : tx;
-  if (!tx || !rx) {
-    state.SkipWithError(render(tx ? rx.error() : tx.error()).c_str());
+  auto stations = bench::open_stations(state, tx_cfg, rx_cfg);
+  if (!stations)
     return;
-  }
+  auto tx = stations->tx;
+  auto rx = stations->rx;
   auto counter = std::make_shared<arrival_counter>();
-  (*rx)->start(counter);
-  (*tx)->start(std::make_shared<arrival_counter>());
-  auto& prof = (*tx)->profile();
+  rx->start(counter);
+  tx->start(std::make_shared<arrival_counter>());
+  auto& prof = tx->profile();
   auto frame_bits = double(prof.mtu) * 8 + prof.frame_overhead_bits;
   auto frame_ns = emu::frame_time_ns(prof.mtu, prof.frame_overhead_bits,
                                      prof.bandwidth_bps);
@@ -124,7 +119,7 @@ void emu_bandwidth(benchmark::State& state, const char* profile,
   for (auto _ : state) {
     counter->reset();
     for (uint64_t sent = 0; sent < frames;) {
-      auto err = (*tx)->send(2, payload.data(), payload.size(), prio_bulk);
+      auto err = tx->send(2, payload.data(), payload.size(), prio_bulk);
       if (!err) {
         ++sent;
       } else if (is(err, ec::queue_full)) {
@@ -156,8 +151,8 @@ void emu_bandwidth(benchmark::State& state, const char* profile,
     received += got;
     lost += frames - got;
   }
-  (*tx)->stop();
-  (*rx)->stop();
+  tx->stop();
+  rx->stop();
   if (seconds <= 0)
     return;
   auto delivered = bits / seconds;

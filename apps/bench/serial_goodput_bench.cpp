@@ -114,18 +114,16 @@ void serial_goodput(benchmark::State& state) {
     state.SkipWithError(("no pseudo-terminals: " + error).c_str());
     return;
   }
-  auto* kind = find_link_kind("serial");
   option_map opts{{"baud", std::to_string(baud)}, {"mtu", "32"}};
-  auto tx = kind->open(device_config{"tx0", "serial", cable->path_a(), opts});
-  auto rx = tx ? kind->open(device_config{"rx0", "serial", cable->path_b(),
-                                          opts})
-               : tx;
-  if (!tx || !rx) {
-    state.SkipWithError(render(tx ? rx.error() : tx.error()).c_str());
+  auto stations = bench::open_stations(
+    state, {"tx0", "serial", cable->path_a(), opts},
+    {"rx0", "serial", cable->path_b(), opts});
+  if (!stations)
     return;
-  }
-  auto tx_port = make_port(*tx, reassembly_limits{});
-  auto rx_port = make_port(*rx, reassembly_limits{});
+  auto tx = stations->tx;
+  auto rx = stations->rx;
+  auto tx_port = make_port(tx, reassembly_limits{});
+  auto rx_port = make_port(rx, reassembly_limits{});
   if (!tx_port || !rx_port) {
     state.SkipWithError("make_port failed");
     return;
@@ -141,9 +139,9 @@ void serial_goodput(benchmark::State& state) {
       a->stop();
       b->stop();
     }
-  } guard{*tx, *rx};
-  (*rx)->start(counter);
-  (*tx)->start(std::make_shared<bench::ignoring_handler>());
+  } guard{tx, rx};
+  rx->start(counter);
+  tx->start(std::make_shared<bench::ignoring_handler>());
   auto line_Bps = double(baud) / cable_cfg.bits_per_char;
   auto frames = (*tx_port)->frames_for(packet_size);
   // Bytes on the wire per packet, roughly: frame + CRC + COBS + delimiter.
