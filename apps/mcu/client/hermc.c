@@ -107,21 +107,20 @@ static void send_hello(struct hermc_module *m, uint16_t interval_ms) {
 }
 
 /* Our own route: metric 0 in every class, no hop (the neighbour adds its
- * link's cost), as route_table::advertisement(self) does. */
+ * link's cost), as route_table::advertisement(self) does; the layout is
+ * hermc_update_encode's for this one entry, written directly (36 bytes). */
 static void send_update(struct hermc_module *m) {
-  struct hermc_update_entry e;
-  uint8_t k;
-  e.origin = m->cfg.module_id;
-  e.seqno = m->own_seqno;
-  for (k = 0; k < HERMC_SIZE_CLASSES; ++k) {
-    e.metric[k] = 0;
-    e.hops[k] = 0;
-    e.path[k] = NULL;
-  }
-  if (send_scratch(m, hermc_update_encode(m->cfg.module_id, m->cfg.instance,
-                                          &e, 1, m->scratch,
-                                          HERMC_MAX_PACKET))
-      == HERMC_OK)
+  uint8_t *p = m->scratch;
+  uint8_t i;
+  p[0] = 0x10u | HERMC_PT_UPDATE;
+  hermc_put_u16(p + 1, m->cfg.module_id);
+  hermc_put_u64(p + 3, m->cfg.instance);
+  p[11] = 1;
+  hermc_put_u16(p + 12, m->cfg.module_id);
+  hermc_put_u16(p + 14, m->own_seqno);
+  for (i = 16; i < 36u; ++i)
+    p[i] = 0; /* 4 classes: metric 0 (4 bytes), 0 hops (1 byte) */
+  if (send_scratch(m, 36u) == HERMC_OK)
     ++m->counters.tx_updates;
 }
 
@@ -144,6 +143,7 @@ static void send_query(struct hermc_module *m, struct hermc_remote_slot *r) {
                                          body_cap(at)));
 }
 
+/* Contexts are short: on an AVR every string literal also takes RAM. */
 static void send_error(struct hermc_module *m, uint16_t dst, uint64_t rid,
                        uint8_t code, const char *context) {
   size_t at = body_at(dst, 0);
@@ -185,14 +185,14 @@ static void on_response(struct hermc_module *m, uint16_t src,
                         const struct hermc_asl_msg *x) {
   uint8_t i;
   for (i = 0; i < HERMC_MAX_PENDING; ++i) {
-    struct hermc_pending p = m->pending[i];
-    struct hermc_remote_slot *r;
-    if (p.request_id != x->request_id || p.request_id == 0)
+    struct hermc_pending *p = &m->pending[i];
+    struct hermc_remote_slot *r = &m->remotes[p->remote];
+    hermc_response_fn fn = p->fn;
+    void *ctx = p->ctx;
+    if (p->request_id == 0 || x->request_id != p->request_id
+        || r->module != src)
       continue;
-    r = &m->remotes[p.remote];
-    if (r->module != src)
-      continue;
-    m->pending[i].request_id = 0;
+    p->request_id = 0; /* free before the callback, which may reuse it */
     ++m->counters.responses_received;
     if (!x->ok && x->err_category == HERMC_ERROR_CATEGORY_HERM
         && (x->err_code == HERMC_EC_APO_GONE
@@ -200,9 +200,9 @@ static void on_response(struct hermc_module *m, uint16_t src,
             || x->err_code == HERMC_EC_UNAVAILABLE))
       rediscover(m, r);
     if (x->ok)
-      p.fn(p.ctx, HERMC_STATUS_OK, x->payload.data, x->payload.size, 0, 0);
+      fn(ctx, HERMC_STATUS_OK, x->payload.data, x->payload.size, 0, 0);
     else
-      p.fn(p.ctx, HERMC_STATUS_ERROR, NULL, 0, x->err_category, x->err_code);
+      fn(ctx, HERMC_STATUS_ERROR, NULL, 0, x->err_category, x->err_code);
     return;
   }
   ++m->counters.rx_unexpected_response;
@@ -280,7 +280,7 @@ static void on_request(struct hermc_module *m, uint16_t src,
     ++m->counters.rx_unknown_apo;
     if (x->request_id != 0)
       send_error(m, src, x->request_id, HERMC_EC_APO_GONE,
-                 "no such APO on the module");
+                 "no such APO");
     return;
   }
   a = &m->apos[x->id32 - 1u];
@@ -297,12 +297,12 @@ static void on_request(struct hermc_module *m, uint16_t src,
     return;
   }
   if (code != 0) {
-    send_error(m, src, x->request_id, code, "the APO refused the request");
+    send_error(m, src, x->request_id, code, "refused");
     return;
   }
   if (resp_len > body_cap(at) - 11u) {
     send_error(m, src, x->request_id, HERMC_EC_INVALID_PARAMETER,
-               "response too large for the module");
+               "too large");
     return;
   }
   (void)hermc_asl_response_ok_header(x->request_id, m->scratch + at, 11u);
@@ -518,15 +518,6 @@ void hermc_handle_packet(struct hermc_module *m, const uint8_t *p,
     case HERMC_PT_HELLO:
       on_hello(m, p, n);
       break;
-    case HERMC_PT_UPDATE: {
-      /* Checked, not used: a leaf sends everything to its neighbour. */
-      struct hermc_update_header h;
-      if (hermc_update_decode(p, n, &h, NULL, 0) != HERMC_NET_OK)
-        ++m->counters.rx_malformed;
-      else
-        ++m->counters.rx_ignored;
-      break;
-    }
     case HERMC_PT_SEQNO_REQUEST:
       on_seqno_request(m, p, n);
       break;
@@ -574,7 +565,7 @@ int hermc_init(struct hermc_module *m, const struct hermc_config *cfg) {
    * previous boot's query or request is not taken for one of ours. */
   m->next_flood_id = (uint32_t)cfg->instance | 1u;
   m->next_query_id = (uint32_t)(cfg->instance >> 32);
-  m->next_request_id = (cfg->instance << 20) | 1u;
+  m->next_request_id = (uint32_t)(cfg->instance >> 16) | 1u;
   return HERMC_OK;
 }
 
@@ -624,13 +615,13 @@ void hermc_tick(struct hermc_module *m, uint32_t now_ms) {
                       : m->cfg.discovery_max_ms;
   }
   for (i = 0; i < HERMC_MAX_PENDING; ++i) {
-    struct hermc_pending p = m->pending[i];
-    if (p.request_id == 0 || !due(now_ms, p.deadline_ms))
+    struct hermc_pending *p = &m->pending[i];
+    if (p->request_id == 0 || !due(now_ms, p->deadline_ms))
       continue;
-    m->pending[i].request_id = 0;
+    p->request_id = 0; /* free before the callback, which may reuse it */
     ++m->counters.request_timeouts;
-    rediscover(m, &m->remotes[p.remote]);
-    p.fn(p.ctx, HERMC_STATUS_TIMEOUT, NULL, 0, 0, 0);
+    rediscover(m, &m->remotes[p->remote]);
+    p->fn(p->ctx, HERMC_STATUS_TIMEOUT, NULL, 0, 0, 0);
   }
   for (i = 0; i < HERMC_MAX_SUBSCRIBERS; ++i)
     if (m->subscribers[i].module != HERMC_NO_MODULE
@@ -676,7 +667,7 @@ int hermc_request(struct hermc_module *m, int r, const uint8_t *payload,
                   uint32_t timeout_ms) {
   struct hermc_remote_slot *rem;
   struct hermc_pending *slot = NULL;
-  uint64_t rid = 0;
+  uint32_t rid = 0;
   size_t at, i;
   int rc;
   if (r < 0 || r >= m->nremotes || (len > 0 && !payload))

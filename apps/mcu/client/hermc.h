@@ -124,7 +124,7 @@ struct hermc_remote_slot {
 };
 
 struct hermc_pending {
-  uint64_t request_id; /* 0: free slot */
+  uint32_t request_id; /* 0: free slot (the wire's 64-bit id, upper half 0) */
   uint32_t deadline_ms;
   uint8_t remote;
   hermc_response_fn fn;
@@ -156,9 +156,10 @@ struct hermc_flood {
 struct hermc_counters {
   uint32_t rx_packets;        /* packets from the link */
   uint32_t rx_malformed;      /* network packets that did not decode */
-  uint32_t rx_ignored;        /* well-formed but nothing for a leaf (claims,
-                                 conflicts, challenges, seqno requests for
-                                 others, goodbyes of others) */
+  uint32_t rx_ignored;        /* nothing for a leaf: updates (a leaf sends
+                                 everything to its neighbour; not decoded),
+                                 claims, conflicts, challenges, seqno
+                                 requests for others, goodbyes of others */
   uint32_t rx_not_for_us;     /* data for another module: a leaf never
                                  forwards */
   uint32_t rx_auth_unsupported; /* data with flag A (no HERMC_AUTH here) */
@@ -205,7 +206,7 @@ struct hermc_module {
   uint16_t neighbour_interval_ms;
   uint32_t next_query_id;
   uint32_t next_flood_id;
-  uint64_t next_request_id;
+  uint32_t next_request_id;
   uint8_t napos, nremotes, ntopics;
   uint8_t flood_next;       /* the ring's next slot in floods */
   struct hermc_apo apos[HERMC_MAX_APOS];

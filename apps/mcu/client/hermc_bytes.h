@@ -2,8 +2,7 @@
  * with shifts (never memcpy of a struct), for the hermc codecs.
  *
  * Internal to hermc (the network, APO message and APO payload codecs); an
- * application has no need to include it. Header-only (static inline), C99,
- * no heap, no I/O. Every reader checks its bounds against `n` and reports a
+ * application has no need to include it. C99, no heap, no I/O. Every reader checks its bounds against `n` and reports a
  * short input instead of reading past it.
  */
 #ifndef HERMC_BYTES_H
@@ -12,61 +11,14 @@
 #include <stddef.h>
 #include <stdint.h>
 
-static inline void hermc_put_u16(uint8_t *p, uint16_t x) {
-  p[0] = (uint8_t)(x & 0xFFu);
-  p[1] = (uint8_t)(x >> 8);
-}
-
-static inline void hermc_put_u32(uint8_t *p, uint32_t x) {
-  uint8_t i;
-  for (i = 0; i < 4u; ++i)
-    p[i] = (uint8_t)((x >> (8u * i)) & 0xFFu);
-}
-
-static inline void hermc_put_u64(uint8_t *p, uint64_t x) {
-  uint8_t i;
-  for (i = 0; i < 8u; ++i)
-    p[i] = (uint8_t)((x >> (8u * i)) & 0xFFu);
-}
-
-static inline uint16_t hermc_get_u16(const uint8_t *p) {
-  return (uint16_t)((uint16_t)p[0] | (uint16_t)((uint16_t)p[1] << 8));
-}
-
-static inline uint32_t hermc_get_u32(const uint8_t *p) {
-  return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16)
-         | ((uint32_t)p[3] << 24);
-}
-
-static inline uint64_t hermc_get_u64(const uint8_t *p) {
-  uint64_t x = 0;
-  uint8_t i;
-  for (i = 8; i > 0; --i)
-    x = (x << 8) | p[i - 1u];
-  return x;
-}
-
-/* Bytes the shortest LEB128 encoding of `x` takes (1..10). */
-static inline size_t hermc_uleb_size(uint64_t x) {
-  size_t n = 1;
-  while (x >= 0x80u) {
-    x >>= 7;
-    ++n;
-  }
-  return n;
-}
-
-/* Writes the shortest LEB128 encoding of `x` at `p` (room for
- * hermc_uleb_size(x) bytes is the caller's); returns the bytes written. */
-static inline size_t hermc_put_uleb(uint8_t *p, uint64_t x) {
-  size_t n = 0;
-  while (x >= 0x80u) {
-    p[n++] = (uint8_t)((x & 0x7Fu) | 0x80u);
-    x >>= 7;
-  }
-  p[n++] = (uint8_t)x;
-  return n;
-}
+/* Little-endian integers at p (room is the caller's). Out of line, in
+ * hermc_bytes.c: on an 8-bit core every inlined 64-bit shift costs flash. */
+void hermc_put_u16(uint8_t *p, uint16_t x);
+void hermc_put_u32(uint8_t *p, uint32_t x);
+void hermc_put_u64(uint8_t *p, uint64_t x);
+uint16_t hermc_get_u16(const uint8_t *p);
+uint32_t hermc_get_u32(const uint8_t *p);
+uint64_t hermc_get_u64(const uint8_t *p);
 
 /* Reads a canonical (shortest) unsigned LEB128 of at most 10 bytes (64
  * bits) from p[0..n). Returns the bytes read, or 0 when it runs past `n`,

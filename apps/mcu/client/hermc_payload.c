@@ -16,10 +16,23 @@ static uint8_t *room(struct hermc_pw *w, size_t k) {
   return at;
 }
 
-static void put_uleb(struct hermc_pw *w, uint64_t x) {
-  uint8_t *at = room(w, hermc_uleb_size(x));
-  if (at)
-    (void)hermc_put_uleb(at, x);
+/* Counts and lengths fit 32 bits: no 64-bit arithmetic on small cores. */
+static void put_uleb(struct hermc_pw *w, uint32_t x) {
+  size_t n = 1;
+  uint32_t v = x;
+  uint8_t *at;
+  while (v >= 0x80u) {
+    v >>= 7;
+    ++n;
+  }
+  at = room(w, n);
+  if (!at)
+    return;
+  while (x >= 0x80u) {
+    *at++ = (uint8_t)((x & 0x7Fu) | 0x80u);
+    x >>= 7;
+  }
+  *at = (uint8_t)x;
 }
 
 void hermc_pw_begin(struct hermc_pw *w, uint8_t *buf, size_t cap,
@@ -74,7 +87,7 @@ void hermc_pw_bool(struct hermc_pw *w, int x) {
 void hermc_pw_bytes(struct hermc_pw *w, const uint8_t *p, size_t n) {
   uint8_t *at;
   size_t i;
-  put_uleb(w, n);
+  put_uleb(w, (uint32_t)n); /* a longer n fails room() below */
   at = room(w, n);
   if (at)
     for (i = 0; i < n; ++i)
