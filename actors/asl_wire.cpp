@@ -162,16 +162,12 @@ void put(writer& w, const asl_query& x) {
 }
 
 void put(writer& w, const asl_answer& x) {
-  assert(x.entries.size() <= max_answer_entries);
-  auto count = std::min(x.entries.size(), max_answer_entries);
   w.u32(x.query_id);
-  w.u8(static_cast<uint8_t>(count));
-  for (size_t i = 0; i < count; ++i) {
-    auto& e = x.entries[i];
+  w.u8_counted(x.entries, max_answer_entries, [&w](const asl_entry& e) {
     w.u32(e.apo);
     w.str(e.name);
     w.str(e.type);
-  }
+  });
 }
 
 void put(writer& w, const asl_request& x) {

@@ -19,7 +19,9 @@
 // - Ownership: the reader borrows `data` (must outlive it); the writer
 //   borrows the output buffer.
 
+#include <algorithm>
 #include <array>
+#include <cassert>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -116,6 +118,20 @@ public:
     for (; x >= 0x80; x >>= 7)
       out_.push_back(static_cast<uint8_t>((x & 0x7f) | 0x80));
     out_.push_back(static_cast<uint8_t>(x));
+    return *this;
+  }
+
+  /// A list of at most `max` (at most 255) elements: their count in one
+  /// byte, then `put(element)` for each, in order. A longer list is the
+  /// caller's bug: asserted, and cut to its first `max` elements when
+  /// assertions are off. O(elements written) plus what `put` costs.
+  template <class Seq, class Put>
+  le_writer& u8_counted(const Seq& xs, size_t max, Put put) {
+    assert(max <= 255 && xs.size() <= max);
+    auto count = std::min<size_t>({xs.size(), max, 255});
+    u8(static_cast<uint8_t>(count));
+    for (size_t i = 0; i < count; ++i)
+      put(xs[i]);
     return *this;
   }
 

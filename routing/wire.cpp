@@ -328,15 +328,11 @@ HERM_FIXED_PACKET(challenge_reply)
 // -- update ----------------------------------------------------------------------
 
 void encode(const update& x, byte_buffer& out) {
-  assert(x.entries.size() <= max_update_entries);
-  auto count = std::min(x.entries.size(), max_update_entries);
   le_writer w{out};
   w.u8(first_byte(packet_type::update));
   w.u16(x.sender);
   w.u64(x.instance);
-  w.u8(static_cast<uint8_t>(count));
-  for (size_t i = 0; i < count; ++i) {
-    auto& e = x.entries[i];
+  w.u8_counted(x.entries, max_update_entries, [&w](const advertised& e) {
     w.u16(e.origin);
     w.u16(e.seqno);
     for (size_t k = 0; k < size_classes; ++k) {
@@ -349,7 +345,7 @@ void encode(const update& x, byte_buffer& out) {
       for (auto c : e.path[k])
         w.u8(static_cast<uint8_t>(c));
     }
-  }
+  });
 }
 
 caf::expected<update> decode_update(const uint8_t* data, size_t size) {

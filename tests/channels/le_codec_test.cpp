@@ -150,6 +150,23 @@ TEST(le_codec, composite_layout_is_the_fields_back_to_back) {
   EXPECT_EQ(p.f, "hi");
 }
 
+TEST(le_codec, a_counted_list_is_its_count_byte_then_each_element_in_order) {
+  bytes out;
+  le_writer w{out};
+  std::vector<uint16_t> xs{0x0201, 0x0403, 0x0605};
+  w.u8(0xAA).u8_counted(xs, 3, [&w](uint16_t x) { w.u16(x); }).u8(0xBB);
+  EXPECT_EQ(out, (bytes{0xAA, 3, 1, 2, 3, 4, 5, 6, 0xBB}));
+}
+
+TEST(le_codec, an_empty_counted_list_is_a_zero_byte) {
+  bytes out;
+  le_writer w{out};
+  size_t calls = 0;
+  w.u8_counted(std::vector<int>{}, 255, [&calls](int) { ++calls; });
+  EXPECT_EQ(out, bytes{0});
+  EXPECT_EQ(calls, 0u);
+}
+
 TEST(le_codec, truncation_at_every_length_fails_and_stays_failed) {
   auto full = composite();
   for (size_t n = 0; n < full.size(); ++n) {
