@@ -270,6 +270,7 @@ struct sonar_state {
   uint32_t first_seq = 0;
   uint32_t batches = 0;
   uint64_t malformed = 0;
+  uint64_t out_of_range = 0;
   channel_actor line;
   binding<sonar_batch> target;
 
@@ -284,11 +285,9 @@ caf::expected<sonar_options> sonar_opts(const apo_config& cfg) {
   if (auto err = only_options(cfg, {"device", "baud", "batch", "target"}))
     return err;
   sonar_options o;
+  // Without a device the readings come from a board that is a module of
+  // its own (apps/mcu), as requests carrying herm::hermd::srf04_reading.
   o.device = str_option(cfg, "device");
-  if (o.device.empty())
-    return make_error(ec::invalid_config,
-                      where(cfg) + ": option 'device' (the serial line to the "
-                                   "SRF04 board) is required");
   if (auto err = u64_option(cfg, "baud", 9600, 50, 4000000, o.baud))
     return err;
   if (auto err = u64_option(cfg, "batch", 10, 1, 1000, o.batch))
@@ -343,6 +342,25 @@ void send_batch(sonar_actor* self) {
   send_to_target(self, std::move(b));
 }
 
+/// One reading, from the local line or from the board as a module; a
+/// reading without an echo in range is counted, not batched.
+void take_reading(sonar_actor* self, const srf04_reading& r) {
+  auto& s = self->state;
+  if (r.distance_mm == srf04_out_of_range) {
+    ++s.out_of_range;
+    spdlog::debug("{}: SRF04 reading {}: nothing in range ({} so far)",
+                  s.apo_name, r.seq, s.out_of_range);
+    return;
+  }
+  if (s.readings.empty())
+    s.first_seq = r.seq;
+  s.readings.push_back(r.distance_mm);
+  spdlog::debug("{}: SRF04 reading {}: {} mm ({} us)", s.apo_name, r.seq,
+                r.distance_mm, r.echo_us);
+  if (s.readings.size() >= s.opt.batch)
+    send_batch(self);
+}
+
 caf::behavior srf04_batcher(sonar_actor* self, apo_context ctx,
                             sonar_options opt, std::string apo_name) {
   auto& st = self->state;
@@ -350,7 +368,7 @@ caf::behavior srf04_batcher(sonar_actor* self, apo_context ctx,
   st.opt = std::move(opt);
   st.apo_name = std::move(apo_name);
   self->set_down_handler([self](caf::down_msg& msg) {
-    if (msg.source == self->state.line.address()) {
+    if (self->state.line && msg.source == self->state.line.address()) {
       spdlog::warn("{}: sensor line ended: {}", self->state.apo_name,
                    render(msg.reason));
       self->state.line = nullptr;
@@ -361,7 +379,11 @@ caf::behavior srf04_batcher(sonar_actor* self, apo_context ctx,
     caf::anon_send(io, atom::close_v, dev);
   });
   self->set_default_handler(log_unexpected);
-  open_sensor_line(self);
+  if (!st.opt.device.empty())
+    open_sensor_line(self);
+  else
+    spdlog::info("{}: waiting for readings from an SRF04 board module",
+                 st.apo_name);
   bind_target(self);
   return {
     [self](packet_received& pkt) {
@@ -373,17 +395,14 @@ caf::behavior srf04_batcher(sonar_actor* self, apo_context ctx,
                      s.apo_name, s.malformed, render(r.error()));
         return;
       }
-      if (s.readings.empty())
-        s.first_seq = r->seq;
-      s.readings.push_back(r->distance_mm);
-      spdlog::debug("{}: SRF04 reading {}: {} mm ({} us)", s.apo_name, r->seq,
-                    r->distance_mm, r->echo_us);
-      if (s.readings.size() >= s.opt.batch)
-        send_batch(self);
+      take_reading(self, *r);
     },
+    // From a board that is a module (the C client): answered with an empty
+    // message once taken.
+    [self](const srf04_reading& r) { take_reading(self, r); },
     [](link_event&) {},
     [self](atom::retry) {
-      if (!self->state.line)
+      if (!self->state.line && !self->state.opt.device.empty())
         open_sensor_line(self);
     },
   };
@@ -501,8 +520,10 @@ std::vector<apo_kind> make_kinds() {
      }});
   kinds.push_back(kind_with_options(
     "srf04_batcher",
-    "reads an SRF04 ultrasonic board on a serial line (options: device, baud, "
-    "batch, target) and sends every `batch` readings to the APO `target`",
+    "collects SRF04 ultrasonic readings, from a board on a local serial line "
+    "(option device) or from a board that is a HERM module (requests of "
+    "herm::hermd::srf04_reading), and sends every `batch` readings to the APO "
+    "`target` (options: device, baud, batch, target)",
     sonar_opts, srf04_batcher));
   kinds.push_back(kind_with_options(
     "vision_source",

@@ -1,13 +1,17 @@
 #pragma once
 
-// The record an SRF04 ultrasonic board sends on its serial line
-// (docs/protocol.md, "SRF04 reading"): 8 bytes, little endian.
+// An SRF04 ultrasonic reading. A board that is a HERM module of its own
+// (the C client, apps/mcu) sends it to the sensor module's srf04_batcher as
+// an APO payload (registered in testbed_types.hpp as
+// herm::hermd::srf04_reading); a board on a local line sends the 8-byte
+// record of docs/protocol.md, "SRF04 reading" (encode, decode_srf04).
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "caf/expected.hpp"
+#include "caf/meta/type_name.hpp"
 
 #include "actors/runtime/error.hpp"
 
@@ -21,6 +25,15 @@ struct srf04_reading {
   /// Echo pulse width, us (distance_mm * 2000 / 343).
   uint32_t echo_us = 0;
 };
+
+/// No echo within the sensor's range (an echo of 30 ms or more).
+constexpr uint16_t srf04_out_of_range = 0xFFFF;
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, srf04_reading& x) {
+  return f(caf::meta::type_name("herm.srf04_reading"), x.seq, x.distance_mm,
+           x.echo_us);
+}
 
 inline std::vector<uint8_t> encode(const srf04_reading& x) {
   return {static_cast<uint8_t>(x.seq), static_cast<uint8_t>(x.seq >> 8),

@@ -11,6 +11,7 @@
 #include "caf/type_id.hpp"
 
 #include "actors/runtime/type_ids.hpp"
+#include "apps/hermd/srf04.hpp"
 
 namespace herm::hermd {
 
@@ -46,4 +47,5 @@ typename Inspector::result_type inspect(Inspector& f, vision_frame& x) {
 CAF_BEGIN_TYPE_ID_BLOCK(herm_apos, caf::id_block::herm::end)
   CAF_ADD_TYPE_ID(herm_apos, (herm::hermd::sonar_batch))
   CAF_ADD_TYPE_ID(herm_apos, (herm::hermd::vision_frame))
+  CAF_ADD_TYPE_ID(herm_apos, (herm::hermd::srf04_reading))
 CAF_END_TYPE_ID_BLOCK(herm_apos)

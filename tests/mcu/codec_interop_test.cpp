@@ -22,6 +22,7 @@
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/system.hpp"
 #include "actors/runtime/type_ids.hpp"
+#include "apps/hermd/testbed_types.hpp"
 #include "routing/wire.hpp"
 
 #include "apps/mcu/client/hermc_asl.h"
@@ -29,47 +30,13 @@
 #include "apps/mcu/client/hermc_payload.h"
 
 // -- the board's reading as a C++ APO sees it -----------------------------------
+// The type hermd's srf04_batcher receives (apps/hermd/testbed_types.hpp): the
+// board names it herm::hermd::srf04_reading, as CAF_ADD_TYPE_ID spells it.
 
 namespace interop {
-
-struct srf04_reading {
-  uint16_t seq = 0;
-  uint16_t distance_mm = 0;
-  uint32_t echo_us = 0;
-};
-
-template <class Inspector>
-typename Inspector::result_type inspect(Inspector& f, srf04_reading& x) {
-  return f(caf::meta::type_name("herm.srf04_reading"), x.seq, x.distance_mm,
-           x.echo_us);
-}
-
+using herm::hermd::srf04_reading;
 } // namespace interop
 
-// CAF_ADD_TYPE_ID names a type by its C++ spelling ("interop::srf04_reading");
-// the board sends the portable name "herm.srf04_reading", so this block
-// spells CAF_ADD_TYPE_ID out with that name.
-CAF_BEGIN_TYPE_ID_BLOCK(hermc_interop, caf::id_block::herm::end)
-namespace caf {
-template <>
-struct type_id<interop::srf04_reading> {
-  static constexpr type_id_t value
-    = id_block::hermc_interop_first_type_id
-      + (__COUNTER__ - id_block::hermc_interop_type_id_counter_init - 1);
-};
-template <>
-struct type_by_id<type_id<interop::srf04_reading>::value> {
-  using type = interop::srf04_reading;
-};
-template <>
-struct type_name<interop::srf04_reading> {
-  static constexpr const char* value = "herm.srf04_reading";
-};
-template <>
-struct type_name_by_id<type_id<interop::srf04_reading>::value>
-  : type_name<interop::srf04_reading> {};
-} // namespace caf
-CAF_END_TYPE_ID_BLOCK(hermc_interop)
 
 namespace {
 
@@ -442,7 +409,7 @@ public:
   static void SetUpTestSuite() {
     cfg_ = std::make_unique<caf::actor_system_config>();
     herm::configure(*cfg_);
-    cfg_->add_message_types<caf::id_block::hermc_interop>();
+    cfg_->add_message_types<caf::id_block::herm_apos>();
     sys_ = std::make_unique<caf::actor_system>(*cfg_);
   }
 

@@ -103,8 +103,8 @@ TEST(hermc_payload_layout, the_srf04_reading) {
   uint8_t buf[40];
   auto n = hermc_srf04_encode(&x, buf, sizeof buf);
   EXPECT_EQ(take(buf, n),
-            hex("01 01 12 68 65 72 6D 2E 73 72 66 30 34 5F 72 65 61 64 69 6E "
-                "67 07 00 E8 06 45 28 00 00"));
+            hex("01 01 1A 68 65 72 6D 3A 3A 68 65 72 6D 64 3A 3A 73 72 66 30 "
+                "34 5F 72 65 61 64 69 6E 67 07 00 E8 06 45 28 00 00"));
   hermc_srf04_reading back{};
   ASSERT_EQ(hermc_srf04_decode(buf, n, &back), HERMC_PR_OK);
   EXPECT_EQ(back.seq, 7);

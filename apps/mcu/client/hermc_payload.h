@@ -93,7 +93,7 @@ enum hermc_payload_error hermc_pr_finish(struct hermc_pr *r);
 /* -- the SRF04 board's reading ------------------------------------------- */
 
 /* Type name the C++ side registers for the reading. */
-#define HERMC_SRF04_TYPE "herm.srf04_reading"
+#define HERMC_SRF04_TYPE "herm::hermd::srf04_reading"
 
 struct hermc_srf04_reading {
   uint16_t seq;
@@ -101,7 +101,8 @@ struct hermc_srf04_reading {
   uint32_t echo_us;
 };
 
-/* One element `herm.srf04_reading` {seq: u16, distance_mm: u16, echo_us:
+/* One element `herm::hermd::srf04_reading` (hermd registers the type,
+ * apps/hermd/testbed_types.hpp) {seq: u16, distance_mm: u16, echo_us:
  * u32}: 30 bytes. Returns the length, or 0 when cap is too small. */
 size_t hermc_srf04_encode(const struct hermc_srf04_reading *x, uint8_t *out,
                           size_t cap);

@@ -3,7 +3,7 @@
  * to the sensor module's `sonar` APO (docs/mcu.md, "The SRF04 board").
  *
  * Every SRF04_PERIOD_MS the board measures; each reading goes as a request
- * whose payload is one element `herm.srf04_reading` (seq:u16,
+ * whose payload is one element `herm::hermd::srf04_reading` (seq:u16,
  * distance_mm:u16, echo_us:u32) to the APO named SRF04_TARGET_APO, found by
  * hermc's discovery. A reading taken while `sonar` is not discovered yet, or
  * while every pending slot is busy, is not sent and is counted
@@ -33,7 +33,7 @@
 #ifndef SRF04_TARGET_APO
 #define SRF04_TARGET_APO "sonar"
 #endif
-#define SRF04_READING_TYPE "herm.srf04_reading"
+#define SRF04_READING_TYPE HERMC_SRF04_TYPE
 
 /* What the board counts besides hermc's and the drivers' counters (kept
  * for a debugger or a future status APO). */
