@@ -26,6 +26,7 @@ Standard library only.
 """
 
 import argparse
+import functools
 import json
 import os
 import statistics
@@ -147,6 +148,24 @@ def arg(name, key):
 # -- sections ---------------------------------------------------------------------
 
 
+def section(title, fname):
+    """Makes a Report method `m(self, doc)` the writer of the section `title`
+    on the results file `fname`: the decorated method takes no argument,
+    writes the heading, then calls `m` with the file's parsed JSON, or writes
+    a "not in this run" line instead when the file is absent."""
+    def decorate(method):
+        @functools.wraps(method)
+        def write(self):
+            doc = load(f"{self.dir}/{fname}")
+            self.out(f"### {title}", "")
+            if doc is None:
+                self.out(f"Not in this run (no `{fname}` in the results).", "")
+                return
+            method(self, doc)
+        return write
+    return decorate
+
+
 class Report:
     def __init__(self, results):
         self.dir = results
@@ -161,22 +180,10 @@ class Report:
         self.targets.append(f"| {what} | {measured} | {against} | {ratio} | "
                             f"{goal} | {verdict(ok)} |")
 
-    def section(self, title, fname):
-        """Starts the section `title` on the results file `fname`: returns its
-        parsed JSON after writing the heading, or None after writing the
-        heading and a "not in this run" line when the file is absent."""
-        doc = load(f"{self.dir}/{fname}")
-        self.out(f"### {title}", "")
-        if doc is None:
-            self.out(f"Not in this run (no `{fname}` in the results).", "")
-        return doc
-
     # CAN ------------------------------------------------------------------------
-    def can(self):
-        doc = self.section("CAN: payload efficiency and frame rate, emulated 1 Mbit/s bus",
-                           "can_efficiency.json")
-        if doc is None:
-            return
+    @section("CAN: payload efficiency and frame rate, emulated 1 Mbit/s bus",
+             "can_efficiency.json")
+    def can(self, doc):
         self.out("Command: `bench_can_efficiency` (two stations of the `can` "
                  "driver's emulated bus, HERM's port stack). Limit: frames/s of "
                  "8-byte frames at 1 Mbit/s for this identifier format, computed "
@@ -224,10 +231,8 @@ class Report:
                         worst_load[0] <= 1.0)
 
     # serial -----------------------------------------------------------------------
-    def serial(self):
-        doc = self.section("Serial: goodput at 19,200 baud", "serial_goodput.json")
-        if doc is None:
-            return
+    @section("Serial: goodput at 19,200 baud", "serial_goodput.json")
+    def serial(self, doc):
         self.out("Command: `bench_serial_goodput` (two `serial` drivers on a "
                  "paced pseudo-terminal cable, 8N1, MTU 32). Line rate: baud / "
                  "10 bytes/s, the relay's own pacing in the same run. The "
@@ -265,11 +270,9 @@ class Report:
                         worst[0] is not None and worst[0] >= 0.80)
 
     # emulated media ---------------------------------------------------------------
-    def emu(self):
-        doc = self.section("Emulated media: delivered against configured bandwidth",
-                           "emu_bandwidth.json")
-        if doc is None:
-            return
+    @section("Emulated media: delivered against configured bandwidth",
+             "emu_bandwidth.json")
+    def emu(self, doc):
         self.out("Command: `bench_emu_bandwidth` (MTU-sized frames back to back "
                  "through the `emu` driver; the ceiling probes show the machine's "
                  "frame rate, not a target).", "",
@@ -301,10 +304,8 @@ class Report:
                         "≤ 5 %", worst[0] <= 0.05)
 
     # fragmentation ----------------------------------------------------------------
-    def fragmentation(self):
-        doc = self.section("Fragmentation and reassembly", "fragmentation.json")
-        if doc is None:
-            return
+    @section("Fragmentation and reassembly", "fragmentation.json")
+    def fragmentation(self, doc):
         self.out("Command: `bench_fragmentation --benchmark_filter="
                  "split_and_reassemble` (one packet split and reassembled, CRC "
                  "included; CPU time per packet).", "",
@@ -327,11 +328,9 @@ class Report:
         self.out("")
 
     # routing ---------------------------------------------------------------------
-    def routing(self):
-        doc = self.section("Routing: cold-start convergence and repair (simulated time)",
-                           "routing_convergence.json")
-        if doc is None:
-            return
+    @section("Routing: cold-start convergence and repair (simulated time)",
+             "routing_convergence.json")
+    def routing(self, doc):
         self.out(f"Command: `{doc.get('command', 'bench_routing_convergence')}` "
                  "(deterministic: simulated time, so one run; random meshes with "
                  "a third of the extra links 3-station CAN buses; converged is "
@@ -375,10 +374,8 @@ class Report:
                         worst[0] <= 2 and worst[2] == 0)
 
     # round trips -------------------------------------------------------------------
-    def rtt(self):
-        doc = self.section("Request round trips next to peers", "rtt.json")
-        if doc is None:
-            return
+    @section("Request round trips next to peers", "rtt.json")
+    def rtt(self, doc):
         cases = [c for c in doc.get("cases", [])]
         params = doc.get("parameters", {})
         self.out(f"Command: `{doc.get('command', 'herm-bench-rtt')}` (two fresh "
@@ -567,10 +564,8 @@ class Report:
                         span(ratios, "×"), "≤ 2×", max(ratios) <= 2)
 
     # footprint ------------------------------------------------------------------
-    def footprint(self):
-        doc = self.section("hermd's idle footprint", "footprint.json")
-        if doc is None:
-            return
+    @section("hermd's idle footprint", "footprint.json")
+    def footprint(self, doc):
         p = doc.get("parameters", {})
         t = doc.get("targets", {"cpu_pct": 1.0, "rss_mb": 20.0})
         self.out(f"Command: `{doc.get('command', 'hermd_footprint.py')}`: every "
