@@ -1,5 +1,5 @@
 // herm-avr-sim and the sonar board's board support: the harness's pure parts
-// (distance script, echo width, stack scan) as specifications, then the
+// (distance script, echo width, stack scan, EEPROM file) as specifications, then the
 // self-test firmware (tests/mcu/firmware/srf04_selftest.c) run in the
 // harness against a scripted distance, read on the pty like a host would.
 // Skips, saying why, when avr-gcc or libsimavr was not found at configure
@@ -13,12 +13,14 @@
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "apps/mcu/sim/distance_script.hpp"
+#include "apps/mcu/sim/eeprom_file.hpp"
 #include "apps/mcu/sim/stack_report.hpp"
 #include "tests/support/process.hpp"
 #include "tests/support/temp_dir.hpp"
@@ -105,6 +107,63 @@ TEST(stack_report, a_bottom_without_paint_says_the_area_was_not_painted) {
   EXPECT_EQ(use.used, 16u);
   EXPECT_EQ(use.headroom, 0u);
   EXPECT_EQ(measure_stack(ram.data(), 0x111, 0x10F).used, 0u);
+}
+
+// -- the EEPROM file -----------------------------------------------------------
+
+TEST(eeprom_file, a_missing_file_is_an_erased_eeprom_not_an_error) {
+  herm::test::temp_dir dir{"herm-eeprom"};
+  auto img = load_eeprom(dir.path() + "/none.bin", 4096);
+  EXPECT_FALSE(img.found);
+  EXPECT_EQ(img.error, "");
+  EXPECT_TRUE(img.bytes.empty());
+}
+
+TEST(eeprom_file, saves_atomically_and_loads_back_the_same_bytes) {
+  herm::test::temp_dir dir{"herm-eeprom"};
+  auto path = dir.path() + "/board.eeprom";
+  std::vector<uint8_t> ee(4096, 0xFF);
+  ee[0] = 2; // the sonar firmware's boot counter, little endian
+  ee[4095] = 0x5A;
+  ASSERT_EQ(save_eeprom(path, ee.data(), ee.size()), "");
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
+  auto img = load_eeprom(path, ee.size());
+  EXPECT_TRUE(img.found);
+  EXPECT_EQ(img.error, "");
+  EXPECT_EQ(img.bytes, ee);
+  ee[0] = 3; // a later run replaces the image
+  ASSERT_EQ(save_eeprom(path, ee.data(), ee.size()), "");
+  EXPECT_EQ(load_eeprom(path, ee.size()).bytes, ee);
+}
+
+TEST(eeprom_file, a_shorter_file_fills_the_first_bytes_a_longer_one_is_refused) {
+  herm::test::temp_dir dir{"herm-eeprom"};
+  auto path = dir.path() + "/board.eeprom";
+  std::ofstream{path, std::ios::binary} << "\x01\x02\x03";
+  auto img = load_eeprom(path, 4);
+  EXPECT_EQ(img.error, "");
+  EXPECT_EQ(img.bytes, (std::vector<uint8_t>{1, 2, 3}));
+  std::ofstream{path, std::ios::binary} << "12345";
+  img = load_eeprom(path, 4);
+  EXPECT_TRUE(img.found);
+  EXPECT_EQ(img.error, "--eeprom " + path + " holds more than the EEPROM's 4 bytes");
+  EXPECT_TRUE(img.bytes.empty());
+}
+
+TEST(eeprom_file, a_file_that_cannot_be_written_says_which_and_keeps_the_old_one) {
+  herm::test::temp_dir dir{"herm-eeprom"};
+  uint8_t ee[4] = {1, 2, 3, 4};
+  auto err = save_eeprom(dir.path() + "/no/such/dir/board.eeprom", ee, sizeof(ee));
+  EXPECT_EQ(err.rfind("cannot write " + dir.path() + "/no/such/dir/board.eeprom.tmp: ", 0),
+            0u)
+    << err;
+  // A directory in the file's place: the rename fails, the old entry stays.
+  auto path = dir.path() + "/board.eeprom";
+  std::filesystem::create_directory(path);
+  err = save_eeprom(path, ee, sizeof(ee));
+  EXPECT_EQ(err.rfind("cannot rename " + path + ".tmp to " + path + ": ", 0), 0u) << err;
+  EXPECT_TRUE(std::filesystem::is_directory(path));
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
 }
 
 // -- the self-test firmware in the harness -----------------------------------

@@ -3,14 +3,23 @@
 // and PD4/ICP1 (echo). docs/mcu.md, "Running the board in simavr".
 //
 //   herm-avr-sim --firmware herm-srf04-firmware.elf [--distance-mm N]
-//                [--script FILE] [--pty-link PATH] [--max-seconds S]
-//                [--report-stack]
+//                [--script FILE] [--pty-link PATH | --device PATH]
+//                [--eeprom FILE] [--max-seconds S] [--report-stack]
 //
-// Prints `pty PATH` first (the board's serial line), then `ready ...`; at the
-// end `stopped reason=...`, `realtime ...`, `uart ...`, `srf04 ...` and, with
+// UART0 goes to a new pty (its path printed, and --pty-link made to point at
+// it), or with --device to an existing serial line (one end of a paced pty
+// cable, a real tty). --eeprom FILE loads the board's EEPROM from FILE at
+// start (missing: erased) and writes it back at every exit after start, so
+// a board run again is the same board rebooted (the sonar firmware's boot
+// counter, its instance, goes on counting).
+//
+// Prints `pty PATH` (or `line PATH` with --device) first, then `ready ...`;
+// at the end `stopped reason=...`, `realtime ...`, `uart ...`, `srf04 ...`,
+// with --eeprom `eeprom saved FILE bytes=N` (or `eeprom error ...`) and, with
 // --report-stack, `stack used=N ...`. Exit status: 0 after --max-seconds or
-// SIGTERM/SIGINT, 2 when it could not start, 3 when the firmware stopped
-// (returned from main, slept with interrupts off) or crashed.
+// SIGTERM/SIGINT, 2 when it could not start (or could not save --eeprom), 3
+// when the firmware stopped (returned from main, slept with interrupts off)
+// or crashed.
 //
 // Time: simavr runs as fast as the host allows; the harness runs 1 ms of
 // board time at a time and sleeps until the wall clock catches up, so the
@@ -21,6 +30,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cinttypes>
 #include <cstdarg>
 #include <csignal>
@@ -31,6 +41,7 @@
 #include <sstream>
 
 #include "apps/mcu/sim/distance_script.hpp"
+#include "apps/mcu/sim/eeprom_file.hpp"
 #include "apps/mcu/sim/simavr.hpp"
 #include "apps/mcu/sim/srf04_part.hpp"
 #include "apps/mcu/sim/stack_report.hpp"
@@ -93,6 +104,8 @@ int main(int argc, char** argv) {
   uint32_t distance_mm = 1000;
   std::string script_file;
   std::string pty_link;
+  std::string device;
+  std::string eeprom_path;
   double max_seconds = 0;
   bool report_stack = false;
   app.add_option("--firmware", firmware, "the firmware (ELF for the ATmega128)")
@@ -102,8 +115,14 @@ int main(int argc, char** argv) {
   app.add_option("--script", script_file,
                  "a file of `t_ms distance_mm` lines: the obstacle from board "
                  "time t_ms on");
-  app.add_option("--pty-link", pty_link,
-                 "make this symlink point at the board's serial line");
+  auto* link_opt = app.add_option("--pty-link", pty_link,
+                                  "make this symlink point at the board's serial line");
+  app.add_option("--device", device,
+                 "connect UART0 to this existing serial line instead of a new pty")
+    ->excludes(link_opt);
+  app.add_option("--eeprom", eeprom_path,
+                 "keep the board's EEPROM in this file across runs "
+                 "(missing: erased; written back at exit)");
   app.add_option("--max-seconds", max_seconds,
                  "stop after this much board time (0: run until SIGTERM)")
     ->check(CLI::NonNegativeNumber);
@@ -145,8 +164,28 @@ int main(int argc, char** argv) {
   avr->sleep = no_sleep;
   avr->log = LOG_WARNING;
 
+  // The EEPROM after the ELF's .eeprom section: the file is the board's
+  // memory of earlier runs, so it wins.
+  avr_eeprom_desc_t ee{};
+  if (!eeprom_path.empty()) {
+    ee.size = avr->e2end + 1u; // the whole EEPROM
+    avr_ioctl(avr, AVR_IOCTL_EEPROM_GET, &ee);
+    if (ee.ee == nullptr || ee.size == 0) {
+      std::cout << "error the core has no EEPROM for --eeprom" << std::endl;
+      return 2;
+    }
+    auto img = herm::avr_sim::load_eeprom(eeprom_path, ee.size);
+    if (!img.error.empty()) {
+      std::cout << "error " << img.error << std::endl;
+      return 2;
+    }
+    std::copy(img.bytes.begin(), img.bytes.end(), ee.ee);
+  }
+
   std::string error;
-  auto uart = herm::avr_sim::uart_bridge::open(avr, '0', pty_link, error);
+  auto uart = device.empty()
+                ? herm::avr_sim::uart_bridge::open(avr, '0', pty_link, error)
+                : herm::avr_sim::uart_bridge::attach(avr, '0', device, error);
   if (!uart) {
     std::cout << "error " << error << std::endl;
     return 2;
@@ -165,7 +204,7 @@ int main(int argc, char** argv) {
   ::sigaction(SIGTERM, &sa, nullptr);
   ::sigaction(SIGINT, &sa, nullptr);
 
-  std::cout << "pty " << uart->pty_path() << "\n"
+  std::cout << (device.empty() ? "pty " : "line ") << uart->pty_path() << "\n"
             << "ready firmware=" << firmware << " mcu=" << mcu
             << " f_cpu=" << f_cpu << " uart=0 trigger=PB0 echo=PD4" << std::endl;
 
@@ -231,6 +270,16 @@ int main(int argc, char** argv) {
                     use.used, use.headroom, from, static_cast<unsigned>(avr->ramend),
                     use.painted ? "yes" : "no");
       std::cout << line;
+    }
+  }
+  if (!eeprom_path.empty()) {
+    auto err = herm::avr_sim::save_eeprom(eeprom_path, ee.ee, ee.size);
+    if (err.empty()) {
+      std::cout << "eeprom saved " << eeprom_path << " bytes=" << ee.size << "\n";
+    } else {
+      std::cout << "eeprom error " << err << "\n";
+      if (status == 0)
+        status = 2;
     }
   }
   std::cout.flush();

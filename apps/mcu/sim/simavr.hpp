@@ -4,6 +4,7 @@
 // for the harness's C++ sources.
 
 extern "C" {
+#include <avr_eeprom.h>
 #include <avr_ioport.h>
 #include <avr_uart.h>
 #include <sim_avr.h>

@@ -82,15 +82,50 @@ std::unique_ptr<uart_bridge> uart_bridge::open(avr_t* avr, char uart,
     }
     self->link_ = link;
   }
+  self->connect_irqs(uart);
+  return self;
+}
+
+std::unique_ptr<uart_bridge> uart_bridge::attach(avr_t* avr, char uart,
+                                                 const std::string& device,
+                                                 std::string& error) {
+  auto* port = find_uart(avr, uart);
+  if (port == nullptr) {
+    error = std::string{"the core has no UART"} + uart;
+    return nullptr;
+  }
+  std::unique_ptr<uart_bridge> self{new uart_bridge(avr, port)};
+  self->master_ = ::open(device.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+  if (self->master_ < 0) {
+    error = errno_text(("cannot open --device " + device).c_str());
+    return nullptr;
+  }
+  termios tio{};
+  if (::tcgetattr(self->master_, &tio) != 0) {
+    error = errno_text(("--device " + device + " is not a serial line").c_str());
+    return nullptr;
+  }
+  ::cfmakeraw(&tio);
+  tio.c_cflag |= CLOCAL | CREAD;
+  tio.c_cflag &= static_cast<tcflag_t>(~CRTSCTS);
+  if (::tcsetattr(self->master_, TCSANOW, &tio) != 0) {
+    error = errno_text(("cannot set --device " + device + " raw").c_str());
+    return nullptr;
+  }
+  self->pty_path_ = device;
+  self->connect_irqs(uart);
+  return self;
+}
+
+void uart_bridge::connect_irqs(char uart) {
   // Binary on the line: no console echo of what the board prints, and no
   // usleep inside status-register reads (the harness paces time itself).
   uint32_t flags = 0;
-  avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS(uart), &flags);
+  avr_ioctl(avr_, AVR_IOCTL_UART_SET_FLAGS(uart), &flags);
   avr_irq_register_notify(
-    avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ(uart), UART_IRQ_OUTPUT),
-    &uart_bridge::on_output, self.get());
-  self->input_ = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ(uart), UART_IRQ_INPUT);
-  return self;
+    avr_io_getirq(avr_, AVR_IOCTL_UART_GETIRQ(uart), UART_IRQ_OUTPUT),
+    &uart_bridge::on_output, this);
+  input_ = avr_io_getirq(avr_, AVR_IOCTL_UART_GETIRQ(uart), UART_IRQ_INPUT);
 }
 
 uart_bridge::uart_bridge(avr_t* avr, avr_uart_t* uart) : avr_(avr), uart_(uart) {

@@ -1,6 +1,7 @@
 #pragma once
 
-// UART `n` of a simulated AVR, bridged to a pseudo-terminal at the line rate.
+// UART `n` of a simulated AVR, bridged to a pseudo-terminal at the line rate
+// (or to a serial line the caller names: attach()).
 //
 // Board -> host: every byte the firmware writes to UDRn is queued and written
 // to the pty master by pump(). simavr 1.6 already paces the transmitter: UDRE
@@ -55,11 +56,20 @@ public:
                                            const std::string& link,
                                            std::string& error);
 
+  /// Connects UART `uart` of `avr` to an existing serial line `device`
+  /// instead (e.g. one end of a paced pty cable, or a real tty), opened
+  /// raw (8N1, no echo, no flow control) and non-blocking. The line's own
+  /// rate is left as it is: the bridge paces bytes at the UART's rate. On
+  /// failure returns null and says why (with the path) in `error`.
+  static std::unique_ptr<uart_bridge> attach(avr_t* avr, char uart,
+                                             const std::string& device,
+                                             std::string& error);
+
   ~uart_bridge();
   uart_bridge(const uart_bridge&) = delete;
   uart_bridge& operator=(const uart_bridge&) = delete;
 
-  /// The slave side's path, e.g. /dev/pts/7.
+  /// The slave side's path, e.g. /dev/pts/7 (attach: the device's path).
   const std::string& pty_path() const {
     return pty_path_;
   }
@@ -77,6 +87,7 @@ public:
 
 private:
   uart_bridge(avr_t* avr, avr_uart_t* uart);
+  void connect_irqs(char uart);
 
   static void on_output(avr_irq_t* irq, uint32_t value, void* param);
   static avr_cycle_count_t feed(avr_t* avr, avr_cycle_count_t when, void* param);
@@ -86,7 +97,7 @@ private:
   avr_t* avr_;
   avr_uart_t* uart_;
   avr_irq_t* input_ = nullptr;
-  int master_ = -1;
+  int master_ = -1; ///< the pty's master, or the attached device
   std::string pty_path_;
   std::string link_;
   std::deque<uint8_t> to_board_;
