@@ -124,6 +124,7 @@ static void send_update(struct hermc_module *m) {
     ++m->counters.tx_updates;
 }
 
+#if HERMC_TOPICS
 static void send_advertise(struct hermc_module *m, uint8_t t) {
   size_t at = body_at(HERMC_BROADCAST, 1);
   const char *name = m->topics[t].name;
@@ -133,6 +134,7 @@ static void send_advertise(struct hermc_module *m, uint8_t t) {
       == HERMC_OK)
     m->topics[t].advertised = 1;
 }
+#endif /* HERMC_TOPICS */
 
 static void send_query(struct hermc_module *m, struct hermc_remote_slot *r) {
   size_t at = body_at(HERMC_BROADCAST, 1);
@@ -218,6 +220,7 @@ static void on_gone(struct hermc_module *m, uint16_t src, uint32_t apo) {
 
 /* -- local APOs ------------------------------------------------------------- */
 
+#if HERMC_MAX_APOS > 0
 static int apo_matches(const struct hermc_apo *a,
                        const struct hermc_asl_msg *q) {
   if (q->by == HERMC_BY_ANY)
@@ -268,32 +271,42 @@ static void on_query(struct hermc_module *m, uint16_t src,
       ++m->counters.queries_answered;
   }
 }
+#else
+/* No local APO: nothing matches, a query is never answered. */
+static void on_query(struct hermc_module *m, uint16_t src,
+                     const struct hermc_asl_msg *q) {
+  (void)m;
+  (void)src;
+  (void)q;
+}
+#endif
 
 static void on_request(struct hermc_module *m, uint16_t src,
                        const struct hermc_asl_msg *x) {
-  int reliable = x->kind == HERMC_ASL_RELIABLE_REQUEST;
-  size_t at = body_at(src, 0);
-  size_t resp_len = 0;
-  const struct hermc_apo *a;
-  uint8_t code;
-  if (x->id32 == 0 || x->id32 > m->napos) {
+  if (HERMC_MAX_APOS == 0 || x->id32 == 0 || x->id32 > m->napos) {
     ++m->counters.rx_unknown_apo;
     if (x->request_id != 0)
       send_error(m, src, x->request_id, HERMC_EC_APO_GONE,
                  "no such APO");
     return;
   }
-  a = &m->apos[x->id32 - 1u];
+#if HERMC_MAX_APOS > 0
+  size_t at = body_at(src, 0);
+  size_t resp_len = 0;
+  const struct hermc_apo *a = &m->apos[x->id32 - 1u];
+  uint8_t code;
   ++m->counters.requests_served;
   code = a->handler(a->ctx, x->payload.data, x->payload.size,
                     m->scratch + at + 11u, body_cap(at) - 11u, &resp_len);
   if (x->oneway) {
     /* One-way: a reliable one is acknowledged, a plain one not at all.
      * (No duplicate cache: a retransmitted copy reaches the handler again.) */
-    if (reliable)
+#if HERMC_RELIABLE
+    if (x->kind == HERMC_ASL_RELIABLE_REQUEST)
       (void)send_data(m, src, 0,
                       hermc_asl_ack_encode(x->request_id, m->scratch + at,
                                            body_cap(at)));
+#endif
     return;
   }
   if (code != 0) {
@@ -307,8 +320,10 @@ static void on_request(struct hermc_module *m, uint16_t src,
   }
   (void)hermc_asl_response_ok_header(x->request_id, m->scratch + at, 11u);
   (void)send_data(m, src, 0, 11u + resp_len);
+#endif
 }
 
+#if HERMC_TOPICS
 /* -- topics -------------------------------------------------------------------- */
 
 static int find_topic(const struct hermc_module *m, struct hermc_bytes name) {
@@ -354,6 +369,7 @@ static void on_subscribe(struct hermc_module *m, uint16_t src,
   free_slot->topic = (uint8_t)t;
   free_slot->lease_end_ms = m->now_ms + lease;
 }
+#endif /* HERMC_TOPICS */
 
 /* -- receiving ------------------------------------------------------------------ */
 
@@ -373,18 +389,22 @@ static void on_asl(struct hermc_module *m, uint16_t src, const uint8_t *p,
       on_answer(m, src, &x);
       break;
     case HERMC_ASL_REQUEST:
+#if HERMC_RELIABLE
     case HERMC_ASL_RELIABLE_REQUEST:
+#endif
       on_request(m, src, &x);
       break;
     case HERMC_ASL_RESPONSE:
       on_response(m, src, &x);
       break;
+#if HERMC_TOPICS
     case HERMC_ASL_SUBSCRIBE:
       on_subscribe(m, src, &x, 1);
       break;
     case HERMC_ASL_UNSUBSCRIBE:
       on_subscribe(m, src, &x, 0);
       break;
+#endif
     case HERMC_ASL_DOWN:
     case HERMC_ASL_WITHDRAW:
       on_gone(m, src, x.id32);
@@ -446,13 +466,17 @@ static void on_data(struct hermc_module *m, const uint8_t *p, size_t n) {
 }
 
 static void meet_neighbour(struct hermc_module *m) {
-  uint8_t t;
   ++m->counters.neighbour_changes;
   /* It may not know us yet: a hello first, so that it takes our update. */
   send_hello(m, m->cfg.hello_interval_ms);
   send_update(m);
-  for (t = 0; t < m->ntopics; ++t)
-    send_advertise(m, t);
+#if HERMC_TOPICS
+  {
+    uint8_t t;
+    for (t = 0; t < m->ntopics; ++t)
+      send_advertise(m, t);
+  }
+#endif
 }
 
 static void on_hello(struct hermc_module *m, const uint8_t *p, size_t n) {
@@ -552,7 +576,7 @@ int hermc_init(struct hermc_module *m, const struct hermc_config *cfg) {
   uint8_t *raw = (uint8_t *)m;
   if (cfg->module_id == HERMC_NO_MODULE || cfg->module_id == HERMC_BROADCAST
       || cfg->instance == 0 || cfg->hello_interval_ms == 0
-      || cfg->update_every == 0)
+      || cfg->update_every == 0 || (!HERMC_ESCAPED && cfg->escaped))
     return HERMC_ERR_ARG;
   for (i = 0; i < sizeof *m; ++i)
     raw[i] = 0;
@@ -623,26 +647,35 @@ void hermc_tick(struct hermc_module *m, uint32_t now_ms) {
     rediscover(m, &m->remotes[p->remote]);
     p->fn(p->ctx, HERMC_STATUS_TIMEOUT, NULL, 0, 0, 0);
   }
+#if HERMC_TOPICS
   for (i = 0; i < HERMC_MAX_SUBSCRIBERS; ++i)
     if (m->subscribers[i].module != HERMC_NO_MODULE
         && due(now_ms, m->subscribers[i].lease_end_ms))
       m->subscribers[i].module = HERMC_NO_MODULE;
+#endif
 }
 
 int hermc_register_apo(struct hermc_module *m, const char *name,
                        const char *type, hermc_handler handler, void *ctx) {
-  struct hermc_apo *a;
   if (!handler || !name || !type || cstr_len(name) > HERMC_ASL_MAX_STRING
       || cstr_len(type) > HERMC_ASL_MAX_STRING)
     return HERMC_ERR_ARG;
+#if HERMC_MAX_APOS > 0
   if (m->napos >= HERMC_MAX_APOS)
     return HERMC_ERR_NO_ROOM;
-  a = &m->apos[m->napos++];
-  a->name = name;
-  a->type = type;
-  a->handler = handler;
-  a->ctx = ctx;
+  {
+    struct hermc_apo *a = &m->apos[m->napos++];
+    a->name = name;
+    a->type = type;
+    a->handler = handler;
+    a->ctx = ctx;
+  }
   return m->napos;
+#else
+  (void)m;
+  (void)ctx;
+  return HERMC_ERR_NO_ROOM;
+#endif
 }
 
 int hermc_remote(struct hermc_module *m, const char *name) {
@@ -708,6 +741,7 @@ int hermc_request(struct hermc_module *m, int r, const uint8_t *payload,
   return HERMC_OK;
 }
 
+#if HERMC_TOPICS
 int hermc_topic(struct hermc_module *m, const char *name) {
   struct hermc_topic_slot *t;
   if (!name || cstr_len(name) == 0 || cstr_len(name) > HERMC_ASL_MAX_STRING)
@@ -754,3 +788,4 @@ int hermc_publish(struct hermc_module *m, int t, const uint8_t *payload,
   }
   return sent;
 }
+#endif /* HERMC_TOPICS */

@@ -64,7 +64,8 @@ struct hermc_config {
    *  to discovery_max_ms until it is answered. */
   uint16_t discovery_min_ms;
   uint32_t discovery_max_ms;
-  /** Escaped (XON/XOFF) serial framing; both ends must agree. */
+  /** Escaped (XON/XOFF) serial framing; both ends must agree (only with
+   *  HERMC_ESCAPED, hermc_config.h). */
   uint8_t escaped;
 };
 
@@ -131,6 +132,7 @@ struct hermc_pending {
   void *ctx;
 };
 
+#if HERMC_TOPICS
 struct hermc_topic_slot {
   const char *name;   /* not owned */
   uint32_t seq;
@@ -142,6 +144,7 @@ struct hermc_subscriber {
   uint8_t topic;
   uint32_t lease_end_ms;
 };
+#endif
 
 struct hermc_flood {
   uint16_t src;
@@ -154,36 +157,39 @@ struct hermc_flood {
 /** What the module did and refused since hermc_init. Link-level drops
  *  (framing, CRC, reassembly) are in m->rx.frame_stats and m->rx.reasm. */
 struct hermc_counters {
-  uint32_t rx_packets;        /* packets from the link */
-  uint32_t rx_malformed;      /* network packets that did not decode */
-  uint32_t rx_ignored;        /* nothing for a leaf: updates (a leaf sends
+  hermc_count_t rx_packets;        /* packets from the link */
+  hermc_count_t rx_malformed;      /* network packets that did not decode */
+  hermc_count_t rx_ignored;        /* nothing for a leaf: updates (a leaf sends
                                  everything to its neighbour; not decoded),
                                  claims, conflicts, challenges, seqno
                                  requests for others, goodbyes of others */
-  uint32_t rx_not_for_us;     /* data for another module: a leaf never
+  hermc_count_t rx_not_for_us;     /* data for another module: a leaf never
                                  forwards */
-  uint32_t rx_auth_unsupported; /* data with flag A (no HERMC_AUTH here) */
-  uint32_t rx_flood_duplicates; /* floods seen before (or our own) */
-  uint32_t flood_evictions;   /* remembered floods replaced while younger
+  hermc_count_t rx_auth_unsupported; /* data with flag A (no HERMC_AUTH here) */
+  hermc_count_t rx_flood_duplicates; /* floods seen before (or our own) */
+  hermc_count_t flood_evictions;   /* remembered floods replaced while younger
                                  than HERMC_FLOOD_MEMORY_MS (table full) */
-  uint32_t rx_asl_malformed;  /* APO messages that did not decode */
-  uint32_t rx_asl_ignored;    /* APO messages a leaf does not act on */
-  uint32_t rx_unknown_apo;    /* requests for an APO we do not have */
-  uint32_t rx_unexpected_response; /* responses matching no pending one */
-  uint32_t requests_served;
-  uint32_t queries_answered;
-  uint32_t responses_received;
-  uint32_t request_timeouts;
-  uint32_t requests_refused;  /* pending table full, or not discovered */
-  uint32_t subscribers_refused; /* subscribe past HERMC_MAX_SUBSCRIBERS */
-  uint32_t publications_sent;
-  uint32_t tx_packets;
-  uint32_t tx_dropped;        /* packets the link refused (ring full) or
+  hermc_count_t rx_asl_malformed;  /* APO messages that did not decode */
+  hermc_count_t rx_asl_ignored;    /* APO messages a leaf does not act on
+                                     (also subscriptions without HERMC_TOPICS
+                                     and reliable requests without
+                                     HERMC_RELIABLE) */
+  hermc_count_t rx_unknown_apo;    /* requests for an APO we do not have */
+  hermc_count_t rx_unexpected_response; /* responses matching no pending one */
+  hermc_count_t requests_served;
+  hermc_count_t queries_answered;
+  hermc_count_t responses_received;
+  hermc_count_t request_timeouts;
+  hermc_count_t requests_refused;  /* pending table full, or not discovered */
+  hermc_count_t subscribers_refused; /* subscribe past HERMC_MAX_SUBSCRIBERS */
+  hermc_count_t publications_sent;
+  hermc_count_t tx_packets;
+  hermc_count_t tx_dropped;        /* packets the link refused (ring full) or
                                  that did not fit HERMC_MAX_PACKET */
-  uint32_t tx_hellos;
-  uint32_t tx_updates;
-  uint32_t seqno_requests_answered;
-  uint32_t neighbour_changes; /* a new neighbour, or a new instance of it */
+  hermc_count_t tx_hellos;
+  hermc_count_t tx_updates;
+  hermc_count_t seqno_requests_answered;
+  hermc_count_t neighbour_changes; /* a new neighbour, or a new instance of it */
 };
 
 /* -- the module ----------------------------------------------------------- */
@@ -209,11 +215,15 @@ struct hermc_module {
   uint32_t next_request_id;
   uint8_t napos, nremotes, ntopics;
   uint8_t flood_next;       /* the ring's next slot in floods */
+#if HERMC_MAX_APOS > 0
   struct hermc_apo apos[HERMC_MAX_APOS];
+#endif
   struct hermc_remote_slot remotes[HERMC_MAX_REMOTES];
   struct hermc_pending pending[HERMC_MAX_PENDING];
+#if HERMC_TOPICS
   struct hermc_topic_slot topics[HERMC_MAX_TOPICS];
   struct hermc_subscriber subscribers[HERMC_MAX_SUBSCRIBERS];
+#endif
   struct hermc_flood floods[HERMC_FLOOD_CACHE];
   /* Scratch: one outgoing packet is built here, then framed into tx. */
   uint8_t scratch[HERMC_MAX_PACKET];
@@ -221,7 +231,8 @@ struct hermc_module {
 
 /** Resets `m` with `cfg` (copied): no APO, nothing heard, counters zero.
  *  HERMC_ERR_ARG when the id is 0 or 0xFFFF, the instance 0, the hello
- *  interval or update_every 0. Nothing is sent before the first hermc_tick.
+ *  interval or update_every 0, or escaped framing asked for in a build
+ *  without HERMC_ESCAPED. Nothing is sent before the first hermc_tick.
  *  O(sizeof *m). */
 int hermc_init(struct hermc_module *m, const struct hermc_config *cfg);
 
@@ -270,6 +281,7 @@ int hermc_request(struct hermc_module *m, int r, const uint8_t *payload,
                   size_t len, hermc_response_fn fn, void *ctx,
                   uint32_t timeout_ms);
 
+#if HERMC_TOPICS
 /** Declares a topic this module publishes (`name` outlives the module);
  *  advertised at start (or now, if started). Returns its handle (0..) or
  *  HERMC_ERR_NO_ROOM past HERMC_MAX_TOPICS. */
@@ -280,6 +292,7 @@ int hermc_topic(struct hermc_module *m, const char *name);
  *  to (0 when none), or a negative HERMC_ERR_* (nothing sent). */
 int hermc_publish(struct hermc_module *m, int t, const uint8_t *payload,
                   size_t len);
+#endif /* HERMC_TOPICS */
 
 /** Handles one network packet `pkt[0..len)` as if the link had delivered
  *  it (the link calls this; tests and CAN boards may too). */

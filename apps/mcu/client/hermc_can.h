@@ -87,15 +87,15 @@ uint8_t hermc_can_lane(uint8_t priority, uint8_t dst);
 
 /** Counters of a CAN node (the fragment layer's are in can->reasm.stats). */
 typedef struct hermc_can_stats {
-  uint32_t rx_frames;      /* frames taken (for this node or broadcast) */
-  uint32_t rx_filtered;    /* valid HERM frames for other nodes */
-  uint32_t rx_malformed;   /* frames refused: bad identifier (one counter
+  hermc_count_t rx_frames;      /* frames taken (for this node or broadcast) */
+  hermc_count_t rx_filtered;    /* valid HERM frames for other nodes */
+  hermc_count_t rx_malformed;   /* frames refused: bad identifier (one counter
                               per verdict in rx_by_status) or own source */
-  uint32_t rx_by_status[HERMC_CAN_ID_STATUSES];
-  uint32_t tx_frames;      /* frames popped */
-  uint32_t tx_packets;     /* packets accepted */
-  uint32_t tx_refused;     /* packets refused */
-  uint32_t tag_evictions;  /* tag sequences forgotten (HERMC_CAN_TX_SEQS) */
+  hermc_count_t rx_by_status[HERMC_CAN_ID_STATUSES];
+  hermc_count_t tx_frames;      /* frames popped */
+  hermc_count_t tx_packets;     /* packets accepted */
+  hermc_count_t tx_refused;     /* packets refused */
+  hermc_count_t tag_evictions;  /* tag sequences forgotten (HERMC_CAN_TX_SEQS) */
 } hermc_can_stats;
 
 /** A node on one CAN bus. */

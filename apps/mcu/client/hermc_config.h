@@ -15,6 +15,53 @@
 #ifndef HERMC_CONFIG_H
 #define HERMC_CONFIG_H
 
+#include <stdint.h>
+
+/* -- features a board may leave out ------------------------------------------ */
+
+/* Each is 1 (built) by default: the default build is a full leaf module. A
+ * board that has no use for a feature sets it to 0 (-DHERMC_TOPICS=0) and
+ * saves its flash and RAM; what the feature would have handled is then
+ * dropped and counted as described. The sonar firmware's choice is
+ * HERM_SRF04_HERMC_DEFINES in apps/mcu/client/CMakeLists.txt, and the host
+ * tests run the module specifications against that build too
+ * (hermc_module_sonar_test). */
+
+/* Topics: hermc_topic, hermc_publish, advertisements, subscriber leases.
+ * 0: those functions do not exist; subscribe and unsubscribe messages are
+ * counted in rx_asl_ignored. */
+#ifndef HERMC_TOPICS
+#define HERMC_TOPICS 1
+#endif
+
+/* Escaped (XON/XOFF) serial framing (hermc_config.escaped). 0: plain
+ * framing only; hermc_init refuses escaped = 1 (HERMC_ERR_ARG), and
+ * hermc_link_rx_init / hermc_link_tx_init ignore their `escaped` argument. */
+#ifndef HERMC_ESCAPED
+#define HERMC_ESCAPED 1
+#endif
+
+/* Serving reliable requests (APO message kind 13, answered or acknowledged).
+ * 0: they are counted in rx_asl_ignored and not answered (the requester
+ * retries and times out), so a board without it serves plain requests only. */
+#ifndef HERMC_RELIABLE
+#define HERMC_RELIABLE 1
+#endif
+
+/* Width of every counter (module, link, reassembler): 32 bits by default;
+ * 16 halves their RAM and their arithmetic on an 8-bit core, and they wrap
+ * at 65535 (read them as differences). */
+#ifndef HERMC_COUNTER_BITS
+#define HERMC_COUNTER_BITS 32
+#endif
+#if HERMC_COUNTER_BITS == 32
+typedef uint32_t hermc_count_t;
+#elif HERMC_COUNTER_BITS == 16
+typedef uint16_t hermc_count_t;
+#else
+#error "HERMC_COUNTER_BITS must be 16 or 32"
+#endif
+
 /* -- link layer (hermc_link.h) ---------------------------------------------- */
 
 /* Serial link MTU, bytes of one frame (fragment header included) before
@@ -76,7 +123,10 @@
 
 /* -- the module (hermc.h): APOs, discovery, requests, topics, floods ------------ */
 
-/* Local APOs (hermc_register_apo). 1..255. */
+/* Local APOs (hermc_register_apo). 0..255; 0 builds a module that serves
+ * no APO (a board that only sends requests): queries are never answered,
+ * every request gets the typed error apo_gone, hermc_register_apo returns
+ * HERMC_ERR_NO_ROOM, and the answer and request-serving code is left out. */
 #ifndef HERMC_MAX_APOS
 #define HERMC_MAX_APOS 4
 #endif
@@ -136,11 +186,15 @@
 #error "HERMC_TX_RING must be 16..65535"
 #endif
 
-#if HERMC_MAX_APOS < 1 || HERMC_MAX_APOS > 255 || HERMC_MAX_REMOTES < 1 \
+#if HERMC_MAX_APOS < 0 || HERMC_MAX_APOS > 255 || HERMC_MAX_REMOTES < 1 \
   || HERMC_MAX_REMOTES > 255 || HERMC_MAX_PENDING < 1 || HERMC_MAX_PENDING > 255 \
   || HERMC_MAX_TOPICS < 1 || HERMC_MAX_TOPICS > 255 || HERMC_MAX_SUBSCRIBERS < 1 \
   || HERMC_MAX_SUBSCRIBERS > 255 || HERMC_FLOOD_CACHE < 1 || HERMC_FLOOD_CACHE > 255
-#error "HERMC_MAX_APOS, _REMOTES, _PENDING, _TOPICS, _SUBSCRIBERS and HERMC_FLOOD_CACHE must be 1..255"
+#error "HERMC_MAX_APOS must be 0..255; _REMOTES, _PENDING, _TOPICS, _SUBSCRIBERS and HERMC_FLOOD_CACHE 1..255"
+#endif
+#if (HERMC_TOPICS != 0 && HERMC_TOPICS != 1) || (HERMC_ESCAPED != 0 && HERMC_ESCAPED != 1) \
+  || (HERMC_RELIABLE != 0 && HERMC_RELIABLE != 1)
+#error "HERMC_TOPICS, HERMC_ESCAPED and HERMC_RELIABLE must be 0 or 1"
 #endif
 #if HERMC_MAX_PACKET < 64
 #error "the module needs HERMC_MAX_PACKET of at least 64 (a hello, an update, a discovery answer)"

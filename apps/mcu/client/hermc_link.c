@@ -230,7 +230,7 @@ static int complete(hermc_reasm* r, hermc_reasm_slot* s,
   return HERMC_REASM_COMPLETE;
 }
 
-static int drop(uint32_t* counter) {
+static int drop(hermc_count_t* counter) {
   ++*counter;
   return HERMC_REASM_DROPPED;
 }
@@ -400,7 +400,7 @@ void hermc_link_rx_init(hermc_link_rx* rx, bool escaped) {
   rx->dec = 0;
   rx->left = 0;
   rx->code = 0;
-  rx->flags = escaped ? RX_ESCAPED : 0u;
+  rx->flags = HERMC_ESCAPED && escaped ? RX_ESCAPED : 0u;
 }
 
 static void rx_restart(hermc_link_rx* rx, uint8_t skipping) {
@@ -458,6 +458,7 @@ void hermc_link_rx_feed(hermc_link_rx* rx, const uint8_t* bytes, size_t n,
     }
     if (rx->flags & RX_SKIPPING)
       continue;
+#if HERMC_ESCAPED
     if (rx->flags & RX_ESCAPED) {
       if (rx->flags & RX_ESCAPE_PENDING) {
         rx->flags = (uint8_t)(rx->flags & ~RX_ESCAPE_PENDING);
@@ -472,6 +473,7 @@ void hermc_link_rx_feed(hermc_link_rx* rx, const uint8_t* bytes, size_t n,
         continue;
       }
     }
+#endif
     if (rx->run == HERMC_RUN_MAX) {
       ++rx->frame_stats.oversized;
       rx_restart(rx, RX_SKIPPING);
@@ -511,7 +513,7 @@ void hermc_link_tx_init(hermc_link_tx* tx, bool escaped) {
   tx->head = 0;
   tx->count = 0;
   tx->tag = 0;
-  tx->escaped = escaped ? 1u : 0u;
+  tx->escaped = HERMC_ESCAPED && escaped ? 1u : 0u;
   tx->packets = 0;
   tx->refused = 0;
 }
@@ -525,7 +527,7 @@ static void tx_put(hermc_link_tx* tx, uint8_t b) {
 }
 
 static void tx_put_encoded(hermc_link_tx* tx, uint8_t b) {
-  if (tx->escaped && needs_escape(b)) {
+  if (HERMC_ESCAPED && tx->escaped && needs_escape(b)) {
     tx_put(tx, ESCAPE);
     b = (uint8_t)(b ^ ESCAPE_XOR);
   }
@@ -555,7 +557,7 @@ static size_t tx_frames(hermc_link_tx* tx, const uint8_t* pkt, size_t len,
     raw[n + 1] = (uint8_t)(crc & 0xFFu);
     k = hermc_cobs_encode(raw, n + 2u, enc);
     for (i = 0; i < k; ++i) {
-      total += tx->escaped && needs_escape(enc[i]) ? 2u : 1u;
+      total += HERMC_ESCAPED && tx->escaped && needs_escape(enc[i]) ? 2u : 1u;
       if (write)
         tx_put_encoded(tx, enc[i]);
     }

@@ -131,20 +131,20 @@ uint32_t hermc_frag_count(size_t len, uint16_t mtu);
 /** Counters of a reassembler; each dropped frame or packet counts once,
  *  under the names of docs/protocol.md's receiver rules (plus `lost`). */
 typedef struct hermc_reasm_stats {
-  uint32_t packets;      /* packets delivered */
-  uint32_t malformed;    /* frames that did not decode (reserved bits, bad
+  hermc_count_t packets;      /* packets delivered */
+  hermc_count_t malformed;    /* frames that did not decode (reserved bits, bad
                             length field, announced length or single payload
                             above HERMC_MAX_PACKET, wrong width, no stream
                             byte, more than n + 4 stream bytes) */
-  uint32_t duplicates;   /* copies of a frame already placed */
-  uint32_t orphans;      /* consecutive frames that belong to no packet under
+  hermc_count_t duplicates;   /* copies of a frame already placed */
+  hermc_count_t orphans;      /* consecutive frames that belong to no packet under
                             way (first frame missed, tag or size mismatch) */
-  uint32_t timed_out;    /* incomplete packets older than the timeout */
-  uint32_t over_limit;   /* packets refused or evicted for want of a slot */
-  uint32_t bad_checksum; /* packets whose CRC-32 did not match */
-  uint32_t superseded;   /* incomplete packets replaced by a new first frame
+  hermc_count_t timed_out;    /* incomplete packets older than the timeout */
+  hermc_count_t over_limit;   /* packets refused or evicted for want of a slot */
+  hermc_count_t bad_checksum; /* packets whose CRC-32 did not match */
+  hermc_count_t superseded;   /* incomplete packets replaced by a new first frame
                             in their (source, lane) */
-  uint32_t lost;         /* incomplete packets dropped at once because a
+  hermc_count_t lost;         /* incomplete packets dropped at once because a
                             frame was missing (a gap on an in-order link) */
 } hermc_reasm_stats;
 
@@ -200,13 +200,13 @@ uint8_t hermc_reasm_pending(const hermc_reasm* r);
  *  delimiters counts once: as a frame, as idle or under one error
  *  (protocol.md "Serial framing", receiver rules). */
 typedef struct hermc_frame_stats {
-  uint32_t frames;      /* good frames handed to the reassembler */
-  uint32_t idle;        /* empty runs (delimiter after delimiter) */
-  uint32_t bad_cobs;    /* not valid COBS */
-  uint32_t too_short;   /* decoded to fewer than 3 bytes */
-  uint32_t oversized;   /* more than the MTU allows (counted once per run) */
-  uint32_t bad_crc;     /* CRC-16 mismatch */
-  uint32_t bad_escape;  /* escaped mode: 0x7D not followed by 31, 33 or 5D */
+  hermc_count_t frames;      /* good frames handed to the reassembler */
+  hermc_count_t idle;        /* empty runs (delimiter after delimiter) */
+  hermc_count_t bad_cobs;    /* not valid COBS */
+  hermc_count_t too_short;   /* decoded to fewer than 3 bytes */
+  hermc_count_t oversized;   /* more than the MTU allows (counted once per run) */
+  hermc_count_t bad_crc;     /* CRC-16 mismatch */
+  hermc_count_t bad_escape;  /* escaped mode: 0x7D not followed by 31, 33 or 5D */
 } hermc_frame_stats;
 
 /** Largest run of (unescaped) bytes between delimiters that can be valid. */
@@ -229,7 +229,7 @@ typedef struct hermc_link_rx {
 
 /** Resets `rx`: no run under way, no packet, counters zero, time 0.
  *  `escaped`: XON/XOFF mode (protocol.md "Escaped mode"); both ends must
- *  agree. */
+ *  agree. Ignored (plain framing) in a build without HERMC_ESCAPED. */
 void hermc_link_rx_init(hermc_link_rx* rx, bool escaped);
 
 /** Consumes received bytes `bytes[0..n)` (any chunking, one byte at a time
@@ -259,8 +259,8 @@ typedef struct hermc_link_tx {
   uint16_t count;        /* bytes in the ring */
   uint8_t tag;           /* tag of the next packet */
   uint8_t escaped;
-  uint32_t packets;      /* packets queued */
-  uint32_t refused;      /* packets refused (HERMC_ERR_FULL or _TOO_BIG) */
+  hermc_count_t packets;      /* packets queued */
+  hermc_count_t refused;      /* packets refused (HERMC_ERR_FULL or _TOO_BIG) */
   uint8_t ring[HERMC_TX_RING];
 } hermc_link_tx;
 
