@@ -3,6 +3,13 @@
 // (hermc_poll_tx), a millisecond clock (hermc_tick). The test plays the
 // neighbour: it frames packets with the client's own serial link layer and
 // decodes what the module sends with the C codecs.
+//
+// Built twice (tests/mcu/CMakeLists.txt): against the default library
+// (hermc_module_test) and against the sonar firmware's configuration
+// (hermc_module_sonar_test: no topics, no escaped framing, no reliable
+// requests, no local APO, 16-bit counters, smaller bounds). The tests of a
+// feature a build leaves out are replaced by tests of what that build does
+// instead.
 
 #include <gtest/gtest.h>
 
@@ -20,6 +27,9 @@ namespace {
 constexpr uint16_t self_id = 0x0042;
 constexpr uint16_t peer_id = 0x0010;
 constexpr uint64_t self_instance = 0x1122334455667788ull;
+/// The build serves local APOs (HERMC_MAX_APOS > 0): the fixture registers
+/// the echo APO "sonar" as APO 1.
+constexpr bool serves_apos = HERMC_MAX_APOS > 0;
 
 /// A decoded packet the module sent.
 struct sent {
@@ -67,7 +77,8 @@ protected:
     ASSERT_EQ(hermc_init(&m, &cfg), HERMC_OK);
     hermc_link_tx_init(&to_module, false);
     hermc_link_rx_init(&from_module, false);
-    ASSERT_EQ(hermc_register_apo(&m, "sonar", "herm.srf04", echo, &calls), 1);
+    ASSERT_EQ(hermc_register_apo(&m, "sonar", "herm.srf04", echo, &calls),
+              serves_apos ? 1 : HERMC_ERR_NO_ROOM);
   }
 
   /// Frames `pkt` as the neighbour would and feeds the wire bytes.
@@ -249,6 +260,7 @@ TEST_F(hermc_module_test, a_seqno_request_for_its_id_raises_its_seqno) {
 
 // -- discovery and requests -----------------------------------------------------
 
+#if HERMC_MAX_APOS > 0
 TEST_F(hermc_module_test, a_query_by_name_type_or_any_is_answered_once) {
   start();
   deliver(data(peer_id, 0xFFFF, query(9, HERMC_BY_NAME, "sonar"), 77));
@@ -325,6 +337,31 @@ TEST_F(hermc_module_test, a_one_way_request_reaches_the_handler_without_response
   EXPECT_EQ(m.counters.rx_unknown_apo, 1u);
 }
 
+#endif // HERMC_MAX_APOS > 0
+
+#if HERMC_MAX_APOS == 0
+TEST_F(hermc_module_test, without_local_apos_no_query_is_answered_and_requests_get_apo_gone) {
+  start();
+  deliver(data(peer_id, 0xFFFF, query(9, HERMC_BY_NAME, "sonar"), 77));
+  deliver(data(peer_id, 0xFFFF, query(10, HERMC_BY_ANY, ""), 78));
+  EXPECT_TRUE(drain().empty());
+  EXPECT_EQ(m.counters.queries_answered, 0u);
+  deliver(data(peer_id, self_id, request(0x55, 1, hex("01 02 03"))));
+  auto out = drain();
+  ASSERT_EQ(out.size(), 1u);
+  ASSERT_EQ(out[0].asl.kind, HERMC_ASL_RESPONSE);
+  EXPECT_EQ(out[0].asl.request_id, 0x55u);
+  EXPECT_EQ(out[0].asl.ok, 0);
+  EXPECT_EQ(out[0].asl.err_code, HERMC_EC_APO_GONE);
+  deliver(data(peer_id, self_id, request(0, 1, hex("07")))); // one-way
+  EXPECT_TRUE(drain().empty());
+  EXPECT_EQ(m.counters.rx_unknown_apo, 2u);
+  EXPECT_EQ(m.counters.requests_served, 0u);
+  EXPECT_EQ(calls, 0);
+}
+#endif
+
+#if HERMC_RELIABLE && HERMC_MAX_APOS > 0
 TEST_F(hermc_module_test, a_reliable_request_is_answered_and_a_one_way_one_acked) {
   start();
   uint8_t buf[32];
@@ -342,6 +379,20 @@ TEST_F(hermc_module_test, a_reliable_request_is_answered_and_a_one_way_one_acked
   EXPECT_EQ(out[0].asl.kind, HERMC_ASL_ACK);
   EXPECT_EQ(out[0].asl.request_id, 0x9Au);
 }
+#endif
+
+#if !HERMC_RELIABLE
+TEST_F(hermc_module_test, without_reliable_requests_they_are_ignored_and_counted) {
+  start();
+  uint8_t buf[32];
+  auto n = hermc_asl_request_header(0x99, 1, 1, 0, buf, sizeof buf);
+  buf[n++] = 0x42;
+  deliver(data(peer_id, self_id, take(buf, n)));
+  EXPECT_TRUE(drain().empty());
+  EXPECT_EQ(m.counters.rx_asl_ignored, 1u);
+  EXPECT_EQ(calls, 0);
+}
+#endif
 
 TEST_F(hermc_module_test, a_remote_apo_is_discovered_with_backoff_then_requested) {
   int r = hermc_remote(&m, "sonar");
@@ -458,13 +509,16 @@ TEST_F(hermc_module_test, tables_of_apos_remotes_and_topics_are_bounded) {
   for (int i = 0; i < HERMC_MAX_REMOTES; ++i)
     EXPECT_EQ(hermc_remote(&m, "y"), i);
   EXPECT_EQ(hermc_remote(&m, "y"), HERMC_ERR_NO_ROOM);
+#if HERMC_TOPICS
   for (int i = 0; i < HERMC_MAX_TOPICS; ++i)
     EXPECT_EQ(hermc_topic(&m, "z"), i);
   EXPECT_EQ(hermc_topic(&m, "z"), HERMC_ERR_NO_ROOM);
+#endif
 }
 
 // -- topics -------------------------------------------------------------------
 
+#if HERMC_TOPICS
 TEST_F(hermc_module_test, publishes_to_subscribers_within_their_lease_and_bound) {
   int t = hermc_topic(&m, "range");
   start(); // meeting the neighbour advertises the topic
@@ -501,6 +555,16 @@ TEST_F(hermc_module_test, meeting_a_neighbour_advertises_the_topics) {
   EXPECT_EQ(out[2].data.dst, 0xFFFF);
   EXPECT_NE(out[2].data.flood_id, 0u);
 }
+#else
+TEST_F(hermc_module_test, without_topics_subscriptions_are_ignored_and_counted) {
+  start();
+  uint8_t buf[32];
+  auto n = hermc_asl_subscribe_encode("range", 5, 1000, buf, sizeof buf);
+  deliver(data(0x100, self_id, take(buf, n)));
+  EXPECT_TRUE(drain().empty());
+  EXPECT_EQ(m.counters.rx_asl_ignored, 1u);
+}
+#endif
 
 // -- bad input ----------------------------------------------------------------
 
@@ -524,12 +588,15 @@ TEST_F(hermc_module_test, the_flood_cache_is_bounded_and_counts_evictions) {
   for (uint32_t f = 1; f <= HERMC_FLOOD_CACHE + 3; ++f)
     deliver(data(peer_id, 0xFFFF, query(f, HERMC_BY_NAME, "none"), f));
   EXPECT_EQ(m.counters.flood_evictions, 3u);
+  EXPECT_EQ(m.counters.rx_flood_duplicates, 0u);
   // The oldest were evicted: a copy of the first is taken as new.
   deliver(data(peer_id, 0xFFFF, query(1, HERMC_BY_NAME, "sonar"), 1));
-  EXPECT_EQ(drain().size(), 1u);
+  EXPECT_EQ(drain().size(), serves_apos ? 1u : 0u);
+  EXPECT_EQ(m.counters.rx_flood_duplicates, 0u);
   // Our own flood coming back is a duplicate.
   deliver(data(self_id, 0xFFFF, query(1, HERMC_BY_NAME, "sonar"), 5000));
   EXPECT_TRUE(drain().empty());
+  EXPECT_EQ(m.counters.rx_flood_duplicates, 1u);
 }
 
 TEST_F(hermc_module_test, a_full_transmit_ring_drops_and_counts) {
@@ -538,7 +605,9 @@ TEST_F(hermc_module_test, a_full_transmit_ring_drops_and_counts) {
   for (uint32_t i = 1; i <= 40; ++i)
     deliver(data(peer_id, self_id, request(i, 1, hex("01 02 03 04"))));
   EXPECT_GT(m.counters.tx_dropped, 0u);
-  EXPECT_EQ(m.counters.requests_served, 40u);
+  // Each was handled (served, or refused with apo_gone without local APOs).
+  EXPECT_EQ(serves_apos ? m.counters.requests_served : m.counters.rx_unknown_apo,
+            40u);
 }
 
 TEST(hermc_module, init_refuses_impossible_configurations) {
@@ -553,6 +622,9 @@ TEST(hermc_module, init_refuses_impossible_configurations) {
   hermc_config_default(&cfg, 5, 1);
   cfg.hello_interval_ms = 0;
   EXPECT_EQ(hermc_init(&m, &cfg), HERMC_ERR_ARG);
+  hermc_config_default(&cfg, 5, 1);
+  cfg.escaped = 1;
+  EXPECT_EQ(hermc_init(&m, &cfg), HERMC_ESCAPED ? HERMC_OK : HERMC_ERR_ARG);
 }
 
 } // namespace
