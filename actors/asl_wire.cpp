@@ -338,12 +338,10 @@ caf::error get(reader& r, asl_answer& x) {
   uint8_t count = 0;
   if (auto err = r.fields("query_id", x.query_id, "count", count))
     return err;
-  if (count > max_answer_entries)
-    return r.fail(num(count) + " entries, at most " + num(max_answer_entries));
-  if (r.left() < count * min_entry_size)
-    return r.fail(num(count) + " entries need at least "
-                  + n_bytes(count * min_entry_size) + ", " + num(r.left())
-                  + " left");
+  if (auto why = counted_list_problem(count, max_answer_entries,
+                                      min_entry_size, r.left());
+      !why.empty())
+    return r.fail(why);
   x.entries.resize(count);
   for (size_t i = 0; i < count; ++i) {
     r.entry = i + 1;

@@ -304,4 +304,20 @@ private:
   bool ok_;
 };
 
+/// The reading side of le_writer::u8_counted: why a list of `count`
+/// entries of at least `min_entry` (> 0) bytes each cannot follow when
+/// `left` bytes are left and at most `max` entries are allowed ("N entries,
+/// at most M", or "N entries need at least B bytes, L left"), or empty when
+/// it can. A decoder checks this before it allocates for the entries. O(1).
+inline std::string counted_list_problem(size_t count, size_t max,
+                                        size_t min_entry, size_t left) {
+  if (count > max)
+    return std::to_string(count) + " entries, at most " + std::to_string(max);
+  if (left / min_entry < count) // count * min_entry > left, without overflow
+    return std::to_string(count) + " entries need at least "
+           + std::to_string(count * min_entry) + " bytes, "
+           + std::to_string(left) + " left";
+  return {};
+}
+
 } // namespace herm

@@ -357,13 +357,10 @@ caf::expected<update> decode_update(const uint8_t* data, size_t size) {
   x.sender = r.u16();
   x.instance = r.u64();
   size_t count = r.u8();
-  if (count > max_update_entries)
-    return bad(t, num(count) + " entries, at most "
-                    + num(max_update_entries));
-  if (r.left() < count * min_entry_size)
-    return bad(t, num(count) + " entries need at least "
-                    + num(count * min_entry_size) + " bytes, "
-                    + num(r.left()) + " left");
+  if (auto why = counted_list_problem(count, max_update_entries,
+                                      min_entry_size, r.left());
+      !why.empty())
+    return bad(t, why);
   x.entries.resize(count);
   for (size_t i = 0; i < count; ++i) {
     auto where = [&] { return "entry " + num(i + 1) + " of " + num(count); };

@@ -167,6 +167,24 @@ TEST(le_codec, an_empty_counted_list_is_a_zero_byte) {
   EXPECT_EQ(calls, 0u);
 }
 
+TEST(le_codec, a_counted_list_that_cannot_follow_says_why) {
+  struct {
+    size_t count, max, min_entry, left;
+    const char* why;
+  } cases[] = {
+    {0, 0, 6, 0, ""},
+    {3, 3, 6, 18, ""},
+    {3, 3, 6, 100, ""},
+    {4, 3, 6, 100, "4 entries, at most 3"},
+    {3, 3, 6, 17, "3 entries need at least 18 bytes, 17 left"},
+    {255, 255, 20, 0, "255 entries need at least 5100 bytes, 0 left"},
+  };
+  for (auto& c : cases)
+    EXPECT_EQ(counted_list_problem(c.count, c.max, c.min_entry, c.left), c.why)
+      << c.count << " entries of " << c.min_entry << " bytes, " << c.left
+      << " left, at most " << c.max;
+}
+
 TEST(le_codec, truncation_at_every_length_fails_and_stays_failed) {
   auto full = composite();
   for (size_t n = 0; n < full.size(); ++n) {
