@@ -6,15 +6,22 @@
 // RS232C sensor--main (a paced pseudo-terminal cable at 19,200 baud),
 // IEEE 1394a vision--mobile (emulated medium), Ethernet mobile--main (UDP on
 // loopback) and a CAN 2.0 bus main--mobile--sensor (the emulated bus; this
-// machine's kernel has no CAN). An emulated AVR board with an SRF04 sensor
-// (herm-avr-srf04) sends a reading every 30 s on its own serial line to the
-// sensor module, whose local APO sends every ten to the main controller's
-// collector; vision sends 100 bytes every 60 s through mobile. Periods are
-// divided by --time-scale so that the scenario runs in seconds.
+// machine's kernel has no CAN). The AVR ATmega128 board with its SRF04
+// sensor is a fifth module (0xA04, a leaf) on a second RS232C cable at
+// 19,200 baud to the sensor module: the real firmware
+// (herm-srf04-firmware.elf) running in simavr (herm-avr-sim, with a
+// scripted obstacle), or, when avr-gcc or libsimavr was missing at build
+// time, herm-mcu-board (the same C client built for the host). It sends
+// every reading as a request to the sensor module's `sonar` APO, which
+// sends every ten to the main controller's collector; vision sends 100
+// bytes every 60 s through mobile. Periods are divided by --time-scale so
+// that the scenario runs in seconds (the firmware's own period, 100 ms, is
+// built in).
 //
-// Then it kills mobile (vision's data fails, routes are withdrawn), restarts
-// it (everything resumes), takes the Ethernet link down (traffic moves to
-// the CAN path) and up again, and stops every module cleanly (goodbyes).
+// Then it reboots the board (a new instance, readings resume), kills mobile
+// (vision's data fails, routes are withdrawn), restarts it (everything
+// resumes), takes the Ethernet link down (traffic moves to the CAN path) and
+// up again, and stops every module cleanly (goodbyes).
 // Each expected event is checked and printed as "EVENT ok NAME: ..." or
 // "EVENT FAILED NAME: ..."; the exit status is 0 when all were seen.
 
@@ -29,12 +36,14 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <iterator>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -42,6 +51,7 @@
 #include <vector>
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "channels/testing/loopback.hpp"
 #include "channels/testing/null_modem.hpp"
@@ -298,6 +308,44 @@ private:
   int events_ = 0;
 };
 
+/// The board's instance as the sensor module's neighbour table has it
+/// (`hermctl --json neighbours`), or nothing while it is not a neighbour.
+std::optional<uint64_t> board_instance(const std::string& neighbours_json,
+                                       const std::string& board_id) {
+  auto j = nlohmann::json::parse(neighbours_json, nullptr, false);
+  if (!j.is_array())
+    return std::nullopt;
+  for (auto& n : j)
+    if (n.is_object() && n.value("module", std::string{}) == board_id)
+      return n.value("instance", uint64_t{0});
+  return std::nullopt;
+}
+
+/// What a collector line "sonar batch N from sensor: K readings (seq S..),
+/// LO..HI mm" says of the batch.
+struct batch_line {
+  long first_seq = 0;
+  long lo = 0;
+  long hi = 0;
+};
+
+std::optional<batch_line> parse_batch(const std::string& line) {
+  auto at = line.find("readings (seq ");
+  batch_line b;
+  if (!has(line, "collector: sonar batch") || at == std::string::npos
+      || std::sscanf(line.c_str() + at, "readings (seq %ld..), %ld..%ld mm",
+                     &b.first_seq, &b.lo, &b.hi)
+           != 3)
+    return std::nullopt;
+  return b;
+}
+
+/// A collector line of a batch whose distances all lie in [lo, hi].
+bool batch_within(const std::string& line, long lo, long hi) {
+  auto b = parse_batch(line);
+  return b && b->lo >= lo && b->hi <= hi && b->lo <= b->hi;
+}
+
 std::string exe_dir() {
   std::error_code ec;
   auto p = fs::read_symlink("/proc/self/exe", ec);
@@ -311,6 +359,7 @@ int main(int argc, char** argv) {
   double scale = 100;
   std::string out_dir;
   bool quiet = false;
+  std::string board = "auto";
   app.add_option("--time-scale", scale,
                  "divide the paper's periods (30 s, 60 s) by this")
     ->check(CLI::Range(1.0, 10000.0));
@@ -318,8 +367,25 @@ int main(int argc, char** argv) {
                  "write the configs and the topology picture here "
                  "(default: a new directory under /tmp)");
   app.add_flag("--quiet", quiet, "leave out the per-packet trace");
+  app.add_option("--board", board,
+                 "the AVR board: avr (the firmware in simavr), host "
+                 "(herm-mcu-board, the same client on this machine) or auto "
+                 "(avr when it was built)")
+    ->check(CLI::IsMember({"auto", "avr", "host"}));
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGPIPE, SIG_IGN);
+
+  // -- the AVR board ------------------------------------------------------------------
+  const auto bin_dir = exe_dir();
+  const auto sim_bin = bin_dir + "/herm-avr-sim";
+  const auto firmware = bin_dir + "/herm-srf04-firmware.elf";
+  const bool avr_built = fs::exists(sim_bin) && fs::exists(firmware);
+  if (board == "avr" && !avr_built) {
+    std::cerr << "herm-testbed: --board avr needs " << sim_bin << " and " << firmware
+              << " (built when avr-gcc and libsimavr are installed: .ci/setup)\n";
+    return 2;
+  }
+  const bool use_avr = board == "avr" || (board == "auto" && avr_built);
 
   // -- the work directory -------------------------------------------------------------
   if (out_dir.empty()) {
@@ -344,10 +410,10 @@ int main(int argc, char** argv) {
   herm::test::null_modem::config rs232;
   rs232.baud = 19200;
   auto cable = herm::test::null_modem::open(rs232, err);
-  herm::test::null_modem::config avr_line;
-  avr_line.baud = 9600;
-  auto avr_cable = herm::test::null_modem::open(avr_line, err);
-  if (!cable || !avr_cable) {
+  // The board's own RS232C line to the sensor module, the same kind of
+  // cable: the board is a module on it, not a device of an APO.
+  auto board_cable = herm::test::null_modem::open(rs232, err);
+  if (!cable || !board_cable) {
     std::cerr << "herm-testbed: no pseudo-terminals: " << err << "\n";
     return 2;
   }
@@ -394,16 +460,18 @@ apos:
     kind: serial
     interface: )" + cable->path_a() + R"(
     baud: 19200
+  - name: rs1          # RS232C to the AVR board, a module of its own (0xA04)
+    kind: serial
+    interface: )" + board_cable->path_b() + R"(
+    baud: 19200
   - name: can0
     kind: can
     interface: emu:)" + media + R"(/can
     node: 3
 apos:
-  - name: sonar        # reads the SRF04 board, sends ten readings at a time
+  - name: sonar        # the board's readings, sent ten at a time
     kind: srf04_batcher
     options:
-      device: )" + avr_cable->path_b() + R"(
-      baud: 9600
       batch: 10
       target: collector
 )");
@@ -437,7 +505,30 @@ apos:
       target: collector
 )");
 
-  testbed tb{exe_dir(), quiet};
+  // The obstacle in front of the SRF04 (simavr's part follows this script):
+  // drifting between 0.3 and 2.5 m, a new distance every second of board
+  // time, for an hour. herm-mcu-board makes up its own (0.5 .. 3.5 m).
+  const std::string board_id = "0xA04";
+  const auto script = out_dir + "/srf04-distance.txt";
+  {
+    std::ofstream f{script};
+    f << "# t_ms distance_mm: the obstacle in front of the SRF04 "
+         "(herm-avr-sim --script)\n";
+    for (int k = 0; k <= 3600; ++k)
+      f << k * 1000 << " " << std::lround(1400 + 1100 * std::sin(k * 0.35)) << "\n";
+  }
+  const long board_lo = use_avr ? 300 : 500;
+  const long board_hi = use_avr ? 2500 : 3499;
+  const std::vector<std::string> board_argv =
+    use_avr ? std::vector<std::string>{sim_bin, "--firmware", firmware, "--device",
+                                       board_cable->path_a(), "--script", script,
+                                       "--eeprom", out_dir + "/avr.eeprom"}
+            : std::vector<std::string>{bin_dir + "/herm-mcu-board", "--device",
+                                       board_cable->path_a(), "--baud", "19200",
+                                       "--send", "sonar", "--period-ms",
+                                       std::to_string(sonar_period)};
+
+  testbed tb{bin_dir, quiet};
   auto hermd = tb.bin("hermd");
   auto hermctl = tb.bin("hermctl");
   auto sock = [&](const std::string& m) { return out_dir + "/" + m + ".sock"; };
@@ -454,11 +545,24 @@ apos:
             << sonar_period << " ms, vision data every " << vision_period
             << " ms, hello every " << hello << " ms\n"
             << "  RS232C cable " << cable->path_a() << " <-> "
-            << cable->path_b() << " at 19,200 baud; SRF04 line "
-            << avr_cable->path_a() << " <-> " << avr_cable->path_b() << "\n";
+            << cable->path_b() << " at 19,200 baud; the board's RS232C cable "
+            << board_cable->path_a() << " <-> " << board_cable->path_b() << "\n";
+  if (use_avr)
+    std::cout << "  AVR board " << board_id
+              << ": herm-srf04-firmware.elf on an ATmega128 in simavr "
+                 "(herm-avr-sim), a reading every 100 ms (the firmware's "
+                 "period), obstacle from "
+              << script << "\n";
+  else
+    std::cout << "  AVR board " << board_id << ": herm-mcu-board, the C client "
+              << "on this machine"
+              << (board == "host" ? " (--board host)"
+                                  : " (herm-avr-sim or the firmware was not built: "
+                                    "it needs avr-gcc and libsimavr, see .ci/setup)")
+              << ", a reading every " << sonar_period << " ms\n";
 
   // -- 1. start ---------------------------------------------------------------------------
-  tb.say("starting four modules and the SRF04 board");
+  tb.say("starting four modules and the AVR board with its SRF04");
   for (auto& [name, cfg] : std::vector<std::pair<std::string, std::string>>{
          {"main", main_cfg}, {"mobile", mobile_cfg}, {"vision", vision_cfg},
          {"sensor", sensor_cfg}}) {
@@ -469,9 +573,7 @@ apos:
     }
     tb.spawn(name, {hermd, cfg});
   }
-  tb.spawn("avr", {tb.bin("herm-avr-srf04"), "--device", avr_cable->path_a(),
-                   "--baud", "9600", "--period-ms",
-                   std::to_string(sonar_period)});
+  tb.spawn("avr", board_argv);
   auto long_wait = std::chrono::milliseconds(std::max<uint64_t>(20000, sonar_period * 25));
   bool routes = true;
   for (auto id : {"0x40", "0x50", "0x30"}) {
@@ -482,6 +584,18 @@ apos:
   }
   tb.event(routes, "routes_converged",
            "the main controller has routes to sensor 0x40, mobile 0x50 and vision 0x30");
+  auto board_on_sensor = tb.wait_line("sensor", 0, [&](const std::string& l) {
+    return has(l, "route to " + board_id + ":") && has(l, "path RS232C");
+  }, 15s);
+  auto board_on_main = tb.wait_line("main", 0, [&](const std::string& l) {
+    return has(l, "route to " + board_id + ":");
+  }, 15s);
+  tb.event(board_on_sensor && board_on_main, "avr_board_is_a_module",
+           board_on_sensor && board_on_main
+             ? "the sensor module routes to the board " + board_id
+                 + " over RS232C, the main controller through it: " + *board_on_main
+             : "no route to the board " + board_id + " on the "
+                 + (board_on_sensor ? "main controller" : "sensor module"));
   tb.pump(std::chrono::milliseconds(hello * 3));
   tb.say("the main controller's routing table (size class 0, the paper's columns)");
   ctl("main", {"routes"});
@@ -491,12 +605,42 @@ apos:
                                               "--png", out_dir + "/topology.png"});
   tb.event(topo_status == 0 && fs::exists(out_dir + "/topology.dot"),
            "topology_written", out_dir + "/topology.dot (and .svg, .png with graphviz)");
+  {
+    std::ifstream dot_file{out_dir + "/topology.dot"};
+    std::string dot{std::istreambuf_iterator<char>{dot_file},
+                    std::istreambuf_iterator<char>{}};
+    auto edge = "\"0x40\" -- \"" + board_id + "\"";
+    tb.event(has(dot, edge), "avr_board_in_topology",
+             has(dot, edge) ? "topology.dot has the board: " + edge + " (RS232C)"
+                            : "topology.dot has no edge " + edge);
+  }
+  tb.say("the sensor module's neighbours (the board among them) and APOs "
+         "(the board serves none: it is a client of `sonar`)");
+  ctl("sensor", {"neighbours"});
+  ctl("sensor", {"apps"});
 
   // -- 2. steady state ------------------------------------------------------------------
   tb.say("steady state: sonar batches over RS232C, vision data through mobile");
   tb.expect_line("sonar_batch_received", "main", 0, long_wait,
                  {"collector: sonar batch"},
                  "no sonar batch reached the collector");
+  // The board's readings, taken by the sensor's APO as requests from the
+  // board module, are what the collector's batches carry.
+  auto board_reading = tb.wait_line("sensor", 0, [](const std::string& l) {
+    return has(l, "sonar: SRF04 reading ");
+  }, long_wait);
+  auto board_batch = tb.wait_line("main", 0, [&](const std::string& l) {
+    return has(l, "collector: sonar batch") && has(l, "from sensor: 10 readings")
+           && batch_within(l, board_lo, board_hi);
+  }, long_wait);
+  tb.event(board_reading && board_batch, "avr_readings_reach_collector",
+           board_reading && board_batch
+             ? *board_batch + " (the board's obstacle: " + std::to_string(board_lo)
+                 + ".." + std::to_string(board_hi) + " mm)"
+             : board_reading ? "no batch of the board's readings ("
+                                 + std::to_string(board_lo) + ".."
+                                 + std::to_string(board_hi) + " mm) at the collector"
+                             : "the sonar APO took no reading from the board");
   // Readings taken before the sensor's APO was bound to the collector are
   // held, not dropped: batch 1 arrives too.
   auto first_batch = tb.wait_line("main", 0, [](const std::string& l) {
@@ -530,7 +674,50 @@ apos:
                  {"collector: vision frame"},
                  "no vision frame reached the collector");
 
-  // -- 3. mobile dies -----------------------------------------------------------------------
+  // -- 3. the board reboots ----------------------------------------------------------------
+  tb.say(use_avr ? "rebooting the AVR board (its EEPROM boot counter is its instance)"
+                 : "restarting the board (herm-mcu-board: a new instance)");
+  auto inst_before = board_instance(ctl("sensor", {"--json", "neighbours"}, false).second,
+                                    board_id);
+  tb.signal("avr", SIGTERM);
+  tb.reap("avr", 10s);
+  auto m_sensor = tb.mark("sensor");
+  tb.restart("avr");
+  std::optional<uint64_t> inst_after;
+  for (auto deadline = clock_type::now() + 20s; clock_type::now() < deadline;) {
+    tb.pump(200ms);
+    inst_after = board_instance(ctl("sensor", {"--json", "neighbours"}, false).second,
+                                board_id);
+    if (inst_after && inst_before && *inst_after != *inst_before)
+      break;
+  }
+  bool new_instance = inst_before && inst_after && *inst_after != *inst_before;
+  // The firmware's instance is (boot count << 16) | module id.
+  if (use_avr && new_instance)
+    new_instance = *inst_after == *inst_before + 0x10000u;
+  auto again = tb.wait_line("sensor", m_sensor, [](const std::string& l) {
+    return has(l, "sonar: SRF04 reading ");
+  }, long_wait);
+  // The batch under way may still hold readings from before the reboot;
+  // the one after it holds the rebooted board's only.
+  int batches = 0;
+  auto resumed = tb.wait_line("main", tb.mark("main"), [&](const std::string& l) {
+    return batch_within(l, board_lo, board_hi) && ++batches == 2;
+  }, long_wait);
+  auto hex = [](std::optional<uint64_t> v) {
+    std::ostringstream o;
+    if (v)
+      o << "0x" << std::hex << *v;
+    else
+      o << "none";
+    return o.str();
+  };
+  tb.event(new_instance && again && resumed, "avr_board_reboots_as_a_new_instance",
+           "instance " + hex(inst_before) + " -> " + hex(inst_after)
+             + (again && resumed ? ", readings resume: " + *resumed
+                                 : ", no readings after the reboot"));
+
+  // -- 4. mobile dies -----------------------------------------------------------------------
   tb.say("killing the mobile module (SIGKILL: no goodbye)");
   auto m_main = tb.mark("main");
   auto m_vision = tb.mark("vision");
@@ -549,7 +736,7 @@ apos:
                  {"collector: vision frame"},
                  "vision data did not come back");
 
-  // -- 4. Ethernet down -----------------------------------------------------------------------
+  // -- 5. Ethernet down -----------------------------------------------------------------------
   tb.say("taking mobile's Ethernet link down: traffic moves to the CAN bus");
   auto m_mobile = tb.mark("mobile");
   m_main = tb.mark("main");
@@ -569,7 +756,7 @@ apos:
                  {"packet 0x30->0x4E", "forwarded via ethernet"},
                  "traffic stayed on CAN");
 
-  // -- 5. clean stop ----------------------------------------------------------------------------
+  // -- 6. clean stop ----------------------------------------------------------------------------
   tb.say("stopping the sensor module cleanly (SIGTERM: a goodbye on every link)");
   m_main = tb.mark("main");
   tb.signal("sensor", SIGTERM);
