@@ -5,6 +5,7 @@
 // them includes it; the agent's interface is routing/routing_agent.hpp.
 // Everything here runs in the agent's thread only.
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 #include <memory>
@@ -82,9 +83,19 @@ struct agent_state {
   /// bounded by route_cell::max_destinations().
   std::set<module_id> fast_dests;
 
-  std::chrono::steady_clock::duration hold() const {
+  /// How long a route learned from a neighbour that says hellos every
+  /// `neighbour_interval` holds without a refresh: that neighbour's update
+  /// period (its hello interval, at least ours, times update_every) times
+  /// hold_factor. A neighbour with slower hellos than ours refreshes its
+  /// routes less often; held for our own period only, its routes would
+  /// expire between two of its updates (Babel holds a route 3.5 times the
+  /// interval its sender announced, RFC 8966 3.5.3). The neighbour table
+  /// bounds the interval a hello may say.
+  std::chrono::steady_clock::duration
+  hold(std::chrono::milliseconds neighbour_interval = {}) const {
+    auto interval = std::max(cfg.hello_interval, neighbour_interval);
     return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-      cfg.hello_interval * cfg.update_every * cfg.hold_factor);
+      interval * cfg.update_every * cfg.hold_factor);
   }
 };
 

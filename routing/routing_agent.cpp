@@ -435,10 +435,12 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
   if (!decoded(self, u))
     return;
   next_hop nh{ch, src};
-  if (!st.neighbours.find(nh)) {
+  auto* from = st.neighbours.find(nh);
+  if (!from) {
     ++st.stats.rx_unknown_neighbour;
     return;
   }
+  auto hold = st.hold(from->interval);
   auto now = self->clock().now();
   if (is_unicast(u->sender))
     act(self, st.alloc->on_heard(u->sender, u->instance, now),
@@ -448,7 +450,7 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
     // Neighbours echo our own routes back to us: not an error.
     if (e.origin == st.table.self())
       continue;
-    switch (st.table.update(nh, e, now, st.hold(), change)) {
+    switch (st.table.update(nh, e, now, hold, change)) {
       case update_result::accepted:
         break;
       case update_result::over_limit:

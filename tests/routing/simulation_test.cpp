@@ -472,6 +472,37 @@ TEST_F(routing_sim, route_listeners_learn_reachability_changes) {
   EXPECT_EQ(log2->size(), 2u);
 }
 
+// Neighbours with different hello intervals: the middle module says hellos
+// (and re-advertises its routes) five times less often than the ends. A
+// route learned from it must hold between two of its updates: held for the
+// receiver's own, shorter update period, module 0's route to module 2
+// expired and came back every two seconds (seen with a slow hermd between
+// a fast one and a board).
+TEST_F(routing_sim, routes_from_a_neighbour_with_slower_hellos_hold_between_its_updates) {
+  auto t = line(3, false); // 0 - 1 - 2
+  sim_network net{*this, test_prefix()};
+  for (size_t i = 0; i < t.n; ++i)
+    net.add_module(id_of(i));
+  net.at(1).cfg.hello_interval = 500ms;
+  for (auto& [members, kind] : t.links)
+    net.connect(members, kind);
+  net.start();
+  net.advance(3s);
+  ASSERT_TRUE(net.route(0, id_of(2)));
+  auto log = std::make_shared<reach_log>();
+  auto probe = spawn_reach_probe(*this, log);
+  caf::anon_send(net.at(0).agent, atom::subscribe_v, atom::routes_v, probe);
+  run();
+  log->clear(); // the current table
+  // Ten of the middle module's update periods (4 hellos of 500 ms each).
+  for (int i = 0; i < 100; ++i)
+    net.advance(200ms);
+  for (auto& r : *log)
+    ADD_FAILURE() << "route to " << to_hex(r.id) << " changed: reachable "
+                  << r.reachable << ", was " << r.was_reachable;
+  EXPECT_TRUE(net.route(0, id_of(2)));
+}
+
 // A module that leaves cleanly says goodbye: its neighbours drop it and the
 // modules beyond them lose their routes to it at once, in zero simulated
 // time, instead of after 1.5 silent hello intervals.
