@@ -9,9 +9,10 @@
  *                  [--echo NAME] [--publish TOPIC --period-ms N]
  *                  [--send APO --period-ms N] [--count N] [--max-seconds S]
  *
- *   --echo NAME      serves APO NAME (type "echo"): the response is the
- *                    request's APO payload, unchanged.
- *   --publish TOPIC  publishes a counter (one `@u32` element) every period.
+ *   --echo NAME      serves APO NAME (type "echo"): a request of one string
+ *                    is answered with "echo:" and the string (as
+ *                    herm-apo-peer's `call` expects).
+ *   --publish TOPIC  publishes a counter (one `@i32` element) every period.
  *   --send APO       sends an SRF04-style reading (`herm::hermd::srf04_reading`,
  *                    seq, distance_mm, echo_us) every period to remote APO
  *                    APO, as a request that waits for its response.
@@ -19,7 +20,7 @@
  *
  * Prints one flushed line per event: "ready ID", "neighbour MID",
  * "served N", "published N subscribers S", "sent N", "response N ok",
- * "response N error CODE", "response N timeout", "not ready", "counters
+ * "response N error CODE", "response N timeout", "not ready N", "counters
  * ...". Exit status: 0 done (count reached, or SIGTERM/SIGINT), 1 the line
  * failed, 2 bad arguments. */
 #define _DEFAULT_SOURCE
@@ -92,14 +93,31 @@ static int open_line(const char *path, unsigned long baud) {
 
 static unsigned long served = 0;
 
+/* The echo APO, as herm-apo-peer's `call` expects it: a request of one
+ * string (`@str`) is answered with "echo:" and that string; anything else
+ * is a typed error (herm::ec::invalid_parameter). */
 static uint8_t echo_handler(void *ctx, const uint8_t *req, size_t req_len,
                             uint8_t *resp, size_t resp_cap,
                             size_t *resp_len) {
   (void)ctx;
-  if (req_len > resp_cap)
-    return 4; /* herm::ec::invalid_parameter: does not fit one packet */
-  memcpy(resp, req, req_len);
-  *resp_len = req_len;
+  struct hermc_pr r;
+  const uint8_t *text = NULL;
+  size_t n = 0;
+  if (hermc_pr_begin(&r, req, req_len) != 1u || !hermc_pr_element(&r, "@str"))
+    return 4;
+  hermc_pr_bytes(&r, &text, &n);
+  uint8_t echoed[256];
+  if (hermc_pr_finish(&r) != HERMC_PR_OK || n > sizeof echoed - 5)
+    return 4;
+  memcpy(echoed, "echo:", 5);
+  memcpy(echoed + 5, text, n);
+  struct hermc_pw w;
+  hermc_pw_begin(&w, resp, resp_cap, 1);
+  hermc_pw_element(&w, "@str");
+  hermc_pw_bytes(&w, echoed, n + 5);
+  *resp_len = hermc_pw_finish(&w);
+  if (*resp_len == 0)
+    return 4; /* does not fit one packet */
   printf("served %lu\n", ++served);
   fflush(stdout);
   return 0;
@@ -161,6 +179,39 @@ static int parse_ulong(const char *s, unsigned long max, unsigned long *out) {
 }
 
 static struct hermc_module module;
+
+/* --publish: the counter as one `@i32` element (what herm-apo-peer's
+ * subscriber prints). */
+static void publish_counter(int t, unsigned long n) {
+  uint8_t payload[16];
+  struct hermc_pw w;
+  hermc_pw_begin(&w, payload, sizeof payload, 1);
+  hermc_pw_element(&w, "@i32");
+  hermc_pw_u32(&w, (uint32_t)n);
+  int sent = hermc_publish(&module, t, payload, hermc_pw_finish(&w));
+  if (sent >= 0)
+    printf("published %lu subscribers %d\n", n, sent);
+  else
+    printf("not published %lu: %d\n", n, sent);
+}
+
+/* --send: reading n, a request that waits for its response. */
+static void send_reading(int r, unsigned long n) {
+  if (!hermc_remote_ready(&module, r)) {
+    printf("not ready %lu\n", n);
+    return;
+  }
+  uint8_t payload[48];
+  uint16_t mm = (uint16_t)(500 + (n * 37) % 3000);
+  struct hermc_srf04_reading x = {(uint16_t)n, mm, (uint32_t)mm * 2000u / 343u};
+  size_t len = hermc_srf04_encode(&x, payload, sizeof payload);
+  int rc = hermc_request(&module, r, payload, len, on_response,
+                         (void *)(uintptr_t)n, 0);
+  if (rc == HERMC_OK)
+    printf("sent %lu\n", n);
+  else
+    printf("not sent %lu: %d\n", n, rc);
+}
 
 int main(int argc, char **argv) {
   const char *device = NULL, *echo = NULL, *topic = NULL, *send_to = NULL;
@@ -267,35 +318,11 @@ int main(int argc, char **argv) {
     if ((int32_t)(now - next_period) >= 0 && (t >= 0 || r >= 0)
         && (count == 0 || done < count)) {
       next_period += (uint32_t)period_ms;
-      uint8_t payload[48];
-      struct hermc_pw w;
-      hermc_pw_begin(&w, payload, sizeof payload, 1);
-      if (t >= 0) {
-        hermc_pw_element(&w, "@u32");
-        hermc_pw_u32(&w, (uint32_t)(done + 1));
-        int sent = hermc_publish(&module, t, payload, hermc_pw_finish(&w));
-        if (sent >= 0) {
-          ++done;
-          printf("published %lu subscribers %d\n", done, sent);
-        }
-      } else if (!hermc_remote_ready(&module, r)) {
-        printf("not ready\n");
-      } else {
-        uint16_t mm = (uint16_t)(500 + (done * 37) % 3000);
-        hermc_pw_element(&w, HERMC_SRF04_TYPE);
-        hermc_pw_u16(&w, (uint16_t)(done + 1));
-        hermc_pw_u16(&w, mm);
-        hermc_pw_u32(&w, (uint32_t)mm * 2000u / 343u);
-        unsigned long seq = done + 1;
-        int rc = hermc_request(&module, r, payload, hermc_pw_finish(&w),
-                               on_response, (void *)(uintptr_t)seq, 0);
-        if (rc == HERMC_OK) {
-          ++done;
-          printf("sent %lu\n", done);
-        } else {
-          printf("not sent %d\n", rc);
-        }
-      }
+      ++done;
+      if (t >= 0)
+        publish_counter(t, done);
+      if (r >= 0)
+        send_reading(r, done);
     }
     size_t k;
     while ((k = hermc_poll_tx(&module, out, sizeof out)) > 0) {
@@ -314,8 +341,9 @@ int main(int argc, char **argv) {
         }
       }
     }
-    if (count != 0 && done >= count && hermc_link_tx_pending(&module.tx) == 0 && t >= 0)
-      break;
+    if (count != 0 && done >= count && hermc_link_tx_pending(&module.tx) == 0
+        && r < 0)
+      break; /* (with --send: runs on for the responses, until --max-seconds) */
     if (max_seconds != 0 && now - start >= max_seconds * 1000u)
       break;
   }
