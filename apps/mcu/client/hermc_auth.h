@@ -35,8 +35,9 @@
  * (ceil((len + 8 + 9) / 64) + 2 compressions; the key's pads are
  * precomputed), plus O(table) scans; hermc_auth_receive at most three
  * HMACs (verify, a challenge's nonce and its signature, a reply's
- * signature: 4). Stack: about 230 bytes at the deepest (an HMAC context and
- * one digest).
+ * signature: 4). Stack on AVR (avr-gcc -Os, -fstack-usage): about 330
+ * bytes at the deepest (receive -> verify or challenge -> HMAC -> one
+ * compression), besides the caller's struct hermc_auth_out (78 bytes).
  *
  * Times are compared as (uint32_t)(now - then), so ages wrap after 49.7
  * days: an entry silent that long looks young for at most the length of the
