@@ -305,6 +305,8 @@ TEST(hermc_reassembler, drops_malformed_frames_and_counts_each_once) {
     {0x40, 0x01, 1, 2, 3, 4, 5, 6},              // more than n + 4 stream bytes
     {0x40, static_cast<uint8_t>(0x80 | (HERMC_MAX_PACKET + 1) % 128),
      static_cast<uint8_t>((HERMC_MAX_PACKET + 1) / 128), 0, 1, 2, 3, 4}, // above max
+    {0x40, 0x80, 0x80, 0x04, 0, 1, 2, 3},        // 65536: no 16-bit wrap to 0
+    {0x40, 0xFF, 0xFF, 0x7F, 0, 1, 2, 3},        // 2^21 - 1, the largest announced
     too_long_single,                             // single above max
     {0x81},                                      // narrow: no stream byte
     {0xC0, 0x01},                                // wide: no stream byte

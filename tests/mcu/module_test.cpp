@@ -444,6 +444,37 @@ TEST_F(hermc_module_test, a_remote_apo_is_discovered_with_backoff_then_requested
   EXPECT_EQ(m.counters.rx_unexpected_response, 1u);
 }
 
+TEST_F(hermc_module_test, a_response_whose_id_differs_only_above_32_bits_matches_nothing) {
+  int r = hermc_remote(&m, "sonar");
+  hermc_tick(&m, now);
+  drain();
+  uint8_t buf[64];
+  auto n = hermc_asl_answer_begin(m.remotes[0].query_id, 1, buf, sizeof buf);
+  n += hermc_asl_answer_entry_encode(0x33, "sonar", 5, "", 0, buf + n,
+                                     sizeof buf - n);
+  deliver(data(0x0020, self_id, take(buf, n)));
+  outcome o;
+  ASSERT_EQ(hermc_request(&m, r, nullptr, 0, on_response, &o, 0), HERMC_OK);
+  auto out = drain();
+  ASSERT_EQ(out.size(), 1u);
+  auto rid = out[0].asl.request_id;
+  ASSERT_NE(rid, 0u);
+  ASSERT_EQ(rid >> 32, 0u);  // the client's ids are 32-bit on the wire's 64
+  n = hermc_asl_response_ok_header(rid | (1ull << 32), buf, sizeof buf);
+  deliver(data(0x0020, self_id, take(buf, n)));
+  EXPECT_EQ(o.calls, 0);
+  EXPECT_EQ(m.counters.rx_unexpected_response, 1u);
+  // The error response with the exact id ends it, with category and code.
+  n = hermc_asl_response_error_encode(rid, HERMC_ERROR_CATEGORY_HERM,
+                                      HERMC_EC_QUEUE_FULL, "busy", 4, buf,
+                                      sizeof buf);
+  deliver(data(0x0020, self_id, take(buf, n)));
+  EXPECT_EQ(o.calls, 1);
+  EXPECT_EQ(o.status, HERMC_STATUS_ERROR);
+  EXPECT_EQ(o.code, HERMC_EC_QUEUE_FULL);
+  EXPECT_TRUE(o.payload.empty());
+}
+
 TEST_F(hermc_module_test, a_request_without_response_times_out_and_rediscovers) {
   int r = hermc_remote(&m, "sonar");
   hermc_tick(&m, now);

@@ -186,27 +186,28 @@ static void on_answer(struct hermc_module *m, uint16_t src,
 static void on_response(struct hermc_module *m, uint16_t src,
                         const struct hermc_asl_msg *x) {
   uint8_t i;
-  for (i = 0; i < HERMC_MAX_PENDING; ++i) {
-    struct hermc_pending *p = &m->pending[i];
-    struct hermc_remote_slot *r = &m->remotes[p->remote];
-    hermc_response_fn fn = p->fn;
-    void *ctx = p->ctx;
-    if (p->request_id == 0 || x->request_id != p->request_id
-        || r->module != src)
-      continue;
-    p->request_id = 0; /* free before the callback, which may reuse it */
-    ++m->counters.responses_received;
-    if (!x->ok && x->err_category == HERMC_ERROR_CATEGORY_HERM
-        && (x->err_code == HERMC_EC_APO_GONE
-            || x->err_code == HERMC_EC_NO_ROUTE
-            || x->err_code == HERMC_EC_UNAVAILABLE))
-      rediscover(m, r);
-    if (x->ok)
-      fn(ctx, HERMC_STATUS_OK, x->payload.data, x->payload.size, 0, 0);
-    else
-      fn(ctx, HERMC_STATUS_ERROR, NULL, 0, x->err_category, x->err_code);
-    return;
-  }
+  /* Our request ids are 32-bit (the wire's upper half 0): anything else
+   * answers no request of ours. */
+  uint32_t rid = (uint32_t)x->request_id;
+  if ((uint32_t)(x->request_id >> 32) == 0)
+    for (i = 0; i < HERMC_MAX_PENDING; ++i) {
+      struct hermc_pending *p = &m->pending[i];
+      struct hermc_remote_slot *r = &m->remotes[p->remote];
+      if (p->request_id == 0 || rid != p->request_id || r->module != src)
+        continue;
+      p->request_id = 0; /* free before the callback, which may reuse it */
+      ++m->counters.responses_received;
+      if (!x->ok && x->err_category == HERMC_ERROR_CATEGORY_HERM
+          && (x->err_code == HERMC_EC_APO_GONE
+              || x->err_code == HERMC_EC_NO_ROUTE
+              || x->err_code == HERMC_EC_UNAVAILABLE))
+        rediscover(m, r);
+      /* The decoder leaves what a response does not carry zero: no payload
+       * on an error, no category and code on success. */
+      p->fn(p->ctx, x->ok ? HERMC_STATUS_OK : HERMC_STATUS_ERROR,
+            x->payload.data, x->payload.size, x->err_category, x->err_code);
+      return;
+    }
   ++m->counters.rx_unexpected_response;
 }
 
@@ -485,9 +486,11 @@ static void on_hello(struct hermc_module *m, const uint8_t *p, size_t n) {
     ++m->counters.rx_malformed;
     return;
   }
+  /* Our neighbour as we know it (none: m->neighbour is 0, never a sender
+   * we take). */
+  int same = h.sender == m->neighbour && h.instance == m->neighbour_instance;
   if (h.interval_ms == 0) {
-    if (m->neighbour != HERMC_NO_MODULE && h.sender == m->neighbour
-        && h.instance == m->neighbour_instance)
+    if (m->neighbour != HERMC_NO_MODULE && same)
       m->neighbour = HERMC_NO_MODULE;
     else
       ++m->counters.rx_ignored;
@@ -499,8 +502,7 @@ static void on_hello(struct hermc_module *m, const uint8_t *p, size_t n) {
     return;
   }
   {
-    int fresh = m->neighbour != h.sender
-                || m->neighbour_instance != h.instance;
+    int fresh = !same;
     m->neighbour = h.sender;
     m->neighbour_instance = h.instance;
     m->neighbour_heard_ms = m->now_ms;

@@ -1,6 +1,8 @@
 /* hermc_asl.c: APO message codec (see hermc_asl.h). */
 #include "hermc_asl.h"
 
+#include <string.h>
+
 #include "hermc_bytes.h"
 
 /* A bounded reader over the message; `bad` sticks at the first error. */
@@ -75,32 +77,91 @@ static void rd_error(struct rd *r, struct hermc_asl_msg *m) {
   m->text = rd_string(r);
 }
 
-static uint64_t rd_request_id(struct rd *r) {
-  uint64_t id = rd_u64(r);
-  if (r->bad == HERMC_ASL_OK && id == 0)
-    r->bad = HERMC_ASL_ZERO_REQUEST_ID;
-  return id;
+/* -- the decoder: one layout per kind ---------------------------------------
+ *
+ * Each kind's fields are a layout of up to four 4-bit field codes, read
+ * from the low nibble up (0 ends it). One loop walks it: the fields, their
+ * order and their checks are those of docs/protocol.md and
+ * actors/asl_wire.cpp, and the first error found is the one returned. */
+enum field {
+  F_END = 0,
+  F_ID32,    /* id32 = u32 */
+  F_BY,      /* by = u8, at most HERMC_BY_ANY (else BAD_QUERY_BY) */
+  F_TEXT,    /* text = string */
+  F_NO_PAT,  /* by any takes no pattern (else PATTERN_ON_ANY) */
+  F_ENTRIES, /* count = u8 (at most 64), then count answer entries */
+  F_RID,     /* request_id = u64; 0 makes it one-way */
+  F_RID_NZ,  /* request_id = u64, not 0 (else ZERO_REQUEST_ID) */
+  F_ONEWAY,  /* oneway = bool */
+  F_PAYLOAD, /* payload = the rest */
+  F_RESULT,  /* ok = bool, then the payload (ok) or an error (not ok) */
+  F_ERROR,   /* err_category = u64, err_code = u8, text = string */
+  F_U32      /* u32 = u32 */
+};
+
+#define LAYOUT(a, b, c, d) \
+  (uint16_t)((a) | (b) << 4 | (c) << 8 | (d) << 12)
+
+/* Indexed by kind - 1 (HERMC_ASL_QUERY .. HERMC_ASL_ACK). In flash on AVR,
+ * where const data would otherwise be copied to RAM. */
+#if defined(__AVR__)
+#include <avr/pgmspace.h>
+#define LAYOUTS_ROM PROGMEM
+#define LAYOUT_OF(k) pgm_read_word(&layouts[(k) - 1u])
+#else
+#define LAYOUTS_ROM
+#define LAYOUT_OF(k) (layouts[(k) - 1u])
+#endif
+static const uint16_t layouts[HERMC_ASL_ACK] LAYOUTS_ROM = {
+  LAYOUT(F_ID32, F_BY, F_TEXT, F_NO_PAT),        /* query */
+  LAYOUT(F_ID32, F_ENTRIES, 0, 0),               /* answer */
+  LAYOUT(F_RID, F_ID32, F_PAYLOAD, 0),           /* request */
+  LAYOUT(F_RID_NZ, F_RESULT, 0, 0),              /* response */
+  LAYOUT(F_ID32, 0, 0, 0),                       /* watch */
+  LAYOUT(F_ID32, 0, 0, 0),                       /* unwatch */
+  LAYOUT(F_ID32, F_ERROR, 0, 0),                 /* down */
+  LAYOUT(F_ID32, F_TEXT, 0, 0),                  /* withdraw */
+  LAYOUT(F_TEXT, F_U32, 0, 0),                   /* subscribe */
+  LAYOUT(F_TEXT, 0, 0, 0),                       /* unsubscribe */
+  LAYOUT(F_TEXT, F_U32, F_PAYLOAD, 0),           /* publish */
+  LAYOUT(F_TEXT, 0, 0, 0),                       /* advertise */
+  LAYOUT(F_RID_NZ, F_ID32, F_ONEWAY, F_PAYLOAD), /* reliable request */
+  LAYOUT(F_RID_NZ, 0, 0, 0),                     /* ack */
+};
+
+/* Reads the count and the entries of an answer (their bytes in entries). */
+static enum hermc_asl_error rd_entries(struct rd *r, struct hermc_asl_msg *m) {
+  size_t start;
+  uint8_t i;
+  m->count = rd_u8(r);
+  if (r->bad != HERMC_ASL_OK)
+    return r->bad;
+  if (m->count > HERMC_ASL_MAX_ANSWER_ENTRIES)
+    return HERMC_ASL_OVER_BOUND;
+  if ((size_t)m->count * 6u > r->n - r->at)
+    return HERMC_ASL_TRUNCATED;
+  start = r->at;
+  for (i = 0; i < m->count && r->bad == HERMC_ASL_OK; ++i) {
+    (void)rd_u32(r);
+    (void)rd_string(r);
+    (void)rd_string(r);
+  }
+  m->entries.data = r->p + start;
+  m->entries.size = r->at - start;
+  return r->bad;
 }
 
 enum hermc_asl_error hermc_asl_decode(const uint8_t *p, size_t n,
                                       struct hermc_asl_msg *m) {
   struct rd r;
-  uint8_t i;
+  uint16_t layout;
   r.p = p;
   r.n = n;
   r.at = 2;
   r.bad = HERMC_ASL_OK;
-  m->id32 = 0;
-  m->request_id = 0;
-  m->u32 = 0;
-  m->by = 0;
-  m->ok = 0;
-  m->oneway = 0;
-  m->count = 0;
-  m->err_code = 0;
-  m->err_category = 0;
+  /* Every field zero, every byte string {NULL, 0}. */
+  memset(m, 0, sizeof *m);
   m->text.data = NULL;
-  m->text.size = 0;
   m->payload = m->text;
   m->entries = m->text;
   if (n == 0)
@@ -112,89 +173,59 @@ enum hermc_asl_error hermc_asl_decode(const uint8_t *p, size_t n,
   if (p[1] < HERMC_ASL_QUERY || p[1] > HERMC_ASL_ACK)
     return HERMC_ASL_BAD_KIND;
   m->kind = (enum hermc_asl_kind)p[1];
-  switch (m->kind) {
-    case HERMC_ASL_QUERY:
-      m->id32 = rd_u32(&r);
-      m->by = rd_u8(&r);
-      if (r.bad == HERMC_ASL_OK && m->by > HERMC_BY_ANY)
-        return HERMC_ASL_BAD_QUERY_BY;
-      m->text = rd_string(&r);
-      if (r.bad == HERMC_ASL_OK && m->by == HERMC_BY_ANY && m->text.size > 0)
-        return HERMC_ASL_PATTERN_ON_ANY;
-      break;
-    case HERMC_ASL_ANSWER: {
-      size_t start;
-      m->id32 = rd_u32(&r);
-      m->count = rd_u8(&r);
-      if (r.bad != HERMC_ASL_OK)
+  for (layout = LAYOUT_OF(p[1]); layout != 0 && r.bad == HERMC_ASL_OK;
+       layout = (uint16_t)(layout >> 4)) {
+    switch (layout & 0x0Fu) {
+      case F_ID32:
+        m->id32 = rd_u32(&r);
         break;
-      if (m->count > HERMC_ASL_MAX_ANSWER_ENTRIES)
-        return HERMC_ASL_OVER_BOUND;
-      if ((size_t)m->count * 6u > n - r.at)
-        return HERMC_ASL_TRUNCATED;
-      start = r.at;
-      for (i = 0; i < m->count && r.bad == HERMC_ASL_OK; ++i) {
-        (void)rd_u32(&r);
-        (void)rd_string(&r);
-        (void)rd_string(&r);
+      case F_BY:
+        m->by = rd_u8(&r);
+        if (r.bad == HERMC_ASL_OK && m->by > HERMC_BY_ANY)
+          return HERMC_ASL_BAD_QUERY_BY;
+        break;
+      case F_TEXT:
+        m->text = rd_string(&r);
+        break;
+      case F_NO_PAT:
+        if (m->by == HERMC_BY_ANY && m->text.size > 0)
+          return HERMC_ASL_PATTERN_ON_ANY;
+        break;
+      case F_ENTRIES: {
+        enum hermc_asl_error e = rd_entries(&r, m);
+        if (e != HERMC_ASL_OK)
+          return e;
+        break;
       }
-      m->entries.data = p + start;
-      m->entries.size = r.at - start;
-      break;
-    }
-    case HERMC_ASL_REQUEST:
-      m->request_id = rd_u64(&r);
-      m->id32 = rd_u32(&r);
-      m->oneway = (uint8_t)(m->request_id == 0);
-      if (r.bad == HERMC_ASL_OK)
-        m->payload = rd_rest(&r);
-      break;
-    case HERMC_ASL_RELIABLE_REQUEST:
-      m->request_id = rd_request_id(&r);
-      m->id32 = rd_u32(&r);
-      m->oneway = rd_bool(&r);
-      if (r.bad == HERMC_ASL_OK)
-        m->payload = rd_rest(&r);
-      break;
-    case HERMC_ASL_RESPONSE:
-      m->request_id = rd_request_id(&r);
-      m->ok = rd_bool(&r);
-      if (r.bad != HERMC_ASL_OK)
+      case F_RID:
+      case F_RID_NZ:
+        m->request_id = rd_u64(&r);
+        m->oneway = (uint8_t)(m->request_id == 0);
+        if (r.bad == HERMC_ASL_OK && m->oneway && (layout & 0x0Fu) == F_RID_NZ)
+          return HERMC_ASL_ZERO_REQUEST_ID;
         break;
-      if (m->ok)
+      case F_ONEWAY:
+        m->oneway = rd_bool(&r);
+        break;
+      case F_RESULT:
+        m->ok = rd_bool(&r);
+        if (r.bad != HERMC_ASL_OK)
+          break;
+        if (m->ok)
+          m->payload = rd_rest(&r);
+        else
+          rd_error(&r, m);
+        break;
+      case F_PAYLOAD:
         m->payload = rd_rest(&r);
-      else
+        break;
+      case F_ERROR:
         rd_error(&r, m);
-      break;
-    case HERMC_ASL_WATCH:
-    case HERMC_ASL_UNWATCH:
-      m->id32 = rd_u32(&r);
-      break;
-    case HERMC_ASL_DOWN:
-      m->id32 = rd_u32(&r);
-      rd_error(&r, m);
-      break;
-    case HERMC_ASL_WITHDRAW:
-      m->id32 = rd_u32(&r);
-      m->text = rd_string(&r);
-      break;
-    case HERMC_ASL_SUBSCRIBE:
-      m->text = rd_string(&r);
-      m->u32 = rd_u32(&r);
-      break;
-    case HERMC_ASL_UNSUBSCRIBE:
-    case HERMC_ASL_ADVERTISE:
-      m->text = rd_string(&r);
-      break;
-    case HERMC_ASL_PUBLISH:
-      m->text = rd_string(&r);
-      m->u32 = rd_u32(&r);
-      if (r.bad == HERMC_ASL_OK)
-        m->payload = rd_rest(&r);
-      break;
-    case HERMC_ASL_ACK:
-      m->request_id = rd_request_id(&r);
-      break;
+        break;
+      default: /* F_U32 */
+        m->u32 = rd_u32(&r);
+        break;
+    }
   }
   if (r.bad != HERMC_ASL_OK)
     return r.bad;

@@ -92,7 +92,10 @@ struct hermc_bytes {
  *   subscribe:   text = topic, u32 = lease_ms
  *   unsubscribe, advertise: text = topic
  *   publish:     text = topic, u32 = seq, payload
- *   ack:         request_id */
+ *   ack:         request_id
+ * Every field a kind does not carry is 0 (byte strings {NULL, 0}): a
+ * response with a payload has err_category and err_code 0, an error
+ * response an empty payload. */
 struct hermc_asl_msg {
   enum hermc_asl_kind kind;
   uint32_t id32;

@@ -94,62 +94,59 @@ int hermc_frag_begin(hermc_frag* f, const uint8_t* pkt, size_t len,
 #if SIZE_MAX > 2097151u /* a 16-bit size_t cannot exceed the bound */
   if (len > HERMC_MAX_ANNOUNCED)
     return HERMC_ERR_TOO_BIG;
+#else /* but its stream (packet and CRC-32) must stay countable */
+  if (len > SIZE_MAX - FRAG_CRC)
+    return HERMC_ERR_TOO_BIG;
 #endif
   f->pkt = pkt;
-  f->len = (uint32_t)len;
+  f->len = len;
   f->off = 0;
   f->mtu = mtu;
   f->index = 0;
   f->tag = (uint8_t)(tag & 0x03u);
   f->done = 0;
-  f->crc = (uint32_t)len + 1u <= mtu ? 0u : hermc_crc32(pkt, len);
+  f->crc = len + 1u <= mtu ? 0u : hermc_crc32(pkt, len);
   return HERMC_OK;
 }
 
-static uint8_t stream_byte(const hermc_frag* f, uint32_t off) {
-  if (off < f->len)
-    return f->pkt[off];
-  return (uint8_t)(f->crc >> (8u * (off - f->len)));
-}
-
+/* Lengths and offsets are size_t throughout (16 bits on an 8-bit core):
+ * the only 32-bit value is the CRC. */
 size_t hermc_frag_next(hermc_frag* f, uint8_t* out) {
-  uint32_t total = f->len + FRAG_CRC;
-  uint32_t room;
-  uint32_t take;
+  size_t total = f->len + FRAG_CRC;
+  size_t take;
   size_t pos = 1;
-  uint8_t wide = f->mtu >= WIDE_MTU;
+  uint8_t head = (uint8_t)(f->tag << 4);
   if (f->done)
     return 0;
   if (f->len + 1u <= f->mtu) {
-    out[0] = (uint8_t)(f->tag << 4);
+    out[0] = head;
     if (f->len > 0)
-      memcpy(out + 1, f->pkt, (size_t)f->len);
+      memcpy(out + 1, f->pkt, f->len);
     f->done = 1;
-    return (size_t)f->len + 1u;
+    return f->len + 1u;
   }
   if (f->index == 0) {
-    uint32_t v = f->len;
-    out[0] = (uint8_t)(0x40u | (uint8_t)(f->tag << 4) | (wide ? 0x08u : 0u));
+    size_t v = f->len;
+    out[0] = (uint8_t)(0x40u | head | (f->mtu >= WIDE_MTU ? 0x08u : 0u));
     do {
       uint8_t b = (uint8_t)(v & 0x7Fu);
       v >>= 7;
       out[pos++] = (uint8_t)(v != 0 ? b | 0x80u : b);
     } while (v != 0);
-  } else if (wide) {
-    out[0] = (uint8_t)(0xC0u | (uint8_t)(f->tag << 4) | (uint8_t)(f->index >> 8 & 0x0Fu));
+  } else if (f->mtu >= WIDE_MTU) {
+    out[0] = (uint8_t)(0xC0u | head | (uint8_t)(f->index >> 8 & 0x0Fu));
     out[pos++] = (uint8_t)(f->index & 0xFFu);
   } else {
-    out[0] = (uint8_t)(0x80u | (uint8_t)(f->tag << 4) | (uint8_t)(f->index & 0x0Fu));
+    out[0] = (uint8_t)(0x80u | head | (uint8_t)(f->index & 0x0Fu));
   }
-  room = (uint32_t)f->mtu - (uint32_t)pos;
-  take = total - f->off < room ? total - f->off : room;
-  if (f->off + take <= f->len) {
-    memcpy(out + pos, f->pkt + f->off, (size_t)take);
-    pos += (size_t)take;
-    f->off += take;
-  } else {
-    while (take-- > 0)
-      out[pos++] = stream_byte(f, f->off++);
+  take = f->mtu - pos;
+  if (total - f->off < take)
+    take = total - f->off;
+  /* Packet bytes, then the CRC-32 little endian. */
+  while (take-- > 0) {
+    size_t at = f->off++;
+    out[pos++] = at < f->len ? f->pkt[at]
+                             : (uint8_t)(f->crc >> (8u * (uint8_t)(at - f->len)));
   }
   ++f->index;
   if (f->off == total)
@@ -235,26 +232,33 @@ static int drop(hermc_count_t* counter) {
   return HERMC_REASM_DROPPED;
 }
 
+/* Lengths, offsets and frame indices are 16-bit (HERMC_MAX_PACKET <= 65000,
+ * so a stream is at most 65004 bytes): cheap on an 8-bit core. */
 static int push_first(hermc_reasm* r, uint8_t src, uint8_t lane,
                       const uint8_t* frame, size_t n, hermc_packet_fn on_packet,
                       void* ctx) {
   uint8_t tag = (uint8_t)(frame[0] >> 4 & 0x03u);
   uint8_t wide = (frame[0] & 0x08u) != 0;
-  uint32_t length = 0;
-  size_t pos = 1;
-  size_t data;
+  uint16_t length = 0;
+  uint8_t pos = 1;
+  uint8_t shift = 0;
+  uint16_t data;
   hermc_reasm_slot* s;
   for (;;) {
     uint8_t b;
     if (pos >= n || pos > 3)
       return drop(&r->stats.malformed);
-    b = frame[pos];
-    length |= (uint32_t)(b & 0x7Fu) << (7u * (pos - 1u));
-    ++pos;
+    b = frame[pos++];
+    /* A third length byte above HERMC_MAX_PACKET >> 14 announces more than
+     * HERMC_MAX_PACKET (and would not fit 16 bits). */
+    if (shift == 14u && b > (uint8_t)(HERMC_MAX_PACKET >> 14))
+      return drop(&r->stats.malformed);
+    length = (uint16_t)(length | (uint16_t)((uint16_t)(b & 0x7Fu) << shift));
+    shift = (uint8_t)(shift + 7u);
     if ((b & 0x80u) == 0)
       break;
   }
-  data = n - pos;
+  data = (uint16_t)(n - pos);
   if (length > HERMC_MAX_PACKET || data == 0 || data > length + FRAG_CRC)
     return drop(&r->stats.malformed);
   s = find_slot(r, src, lane);
@@ -274,9 +278,9 @@ static int push_first(hermc_reasm* r, uint8_t src, uint8_t lane,
   s->tag = tag;
   s->wide = wide;
   s->started_ms = r->now_ms;
-  s->length = (uint16_t)length;
-  s->first_data = (uint16_t)data;
-  s->have = (uint16_t)data;
+  s->length = length;
+  s->first_data = data;
+  s->have = data;
   s->chunk = (uint16_t)(n - (wide ? 2u : 1u));
   s->next = 1;
   memcpy(s->stream, frame + pos, data);
@@ -290,45 +294,48 @@ static int push_consecutive(hermc_reasm* r, uint8_t src, uint8_t lane,
                             hermc_packet_fn on_packet, void* ctx) {
   uint8_t tag = (uint8_t)(frame[0] >> 4 & 0x03u);
   uint8_t wide = (frame[0] & 0x40u) != 0;
-  size_t h = wide ? 2u : 1u;
-  uint32_t modulus = wide ? 4096u : 16u;
-  uint32_t seq;
-  uint32_t total;
-  uint32_t d;
-  uint32_t data;
+  uint8_t h = wide ? 2u : 1u;
+  uint16_t modulus = wide ? 4096u : 16u;
+  uint16_t seq;
+  uint16_t left;
+  uint16_t d;
+  uint16_t data;
   hermc_reasm_slot* s;
   if (n <= h)
     return drop(&r->stats.malformed);
-  seq = wide ? (uint32_t)(frame[0] & 0x0Fu) << 8 | frame[1] : frame[0] & 0x0Fu;
-  data = (uint32_t)(n - h);
+  seq = wide ? (uint16_t)((uint16_t)(frame[0] & 0x0Fu) << 8 | frame[1])
+             : (uint16_t)(frame[0] & 0x0Fu);
+  data = (uint16_t)(n - h);
   s = find_slot(r, src, lane);
   if (s == NULL || s->tag != tag)
     return drop(&r->stats.orphans);
   if (s->wide != wide)
     return drop(&r->stats.malformed);
-  total = (uint32_t)s->length + FRAG_CRC;
-  d = (seq - s->next) & (modulus - 1u);
+  /* While a packet is under way, have = first_data + (next - 1) * chunk. */
+  left = (uint16_t)(s->length + FRAG_CRC - s->have);
+  d = (uint16_t)((uint16_t)(seq - s->next) & (modulus - 1u));
   if (d == 0) {
-    uint32_t left = total - s->have;
     if (data != (left < s->chunk ? left : s->chunk))
       return drop(&r->stats.orphans);
-    memcpy(s->stream + s->have, frame + h, (size_t)data);
+    memcpy(s->stream + s->have, frame + h, data);
     s->have = (uint16_t)(s->have + data);
     ++s->next;
-    if (s->have == total)
+    if (data == left)
       return complete(r, s, on_packet, ctx);
     return HERMC_REASM_PENDING;
   }
   /* Index next + d - modulus, when at least 1, already holds a frame: equal
-   * bytes make this a late copy of it. */
-  if (s->next + d > modulus) {
-    uint32_t j = s->next + d - modulus;
-    uint32_t off = s->first_data + (j - 1u) * s->chunk;
-    if (data == s->chunk && memcmp(s->stream + off, frame + h, (size_t)data) == 0)
+   * bytes make this a late copy of it (its stream bytes start at
+   * first_data + (next + d - modulus - 1) * chunk, below have). */
+  if (s->next > modulus - d) {
+    uint16_t off = (uint16_t)(s->first_data
+                              + (uint16_t)(s->next - 1u - (modulus - d)) * s->chunk);
+    if (data == s->chunk && memcmp(s->stream + off, frame + h, data) == 0)
       return drop(&r->stats.duplicates);
   }
-  /* Index next + d lies past the packet's end: not this packet's frame. */
-  if (s->first_data + (s->next + d - 1u) * (uint32_t)s->chunk >= total)
+  /* Index next + d lies past the packet's end (its bytes would start at
+   * have + d * chunk): not this packet's frame. */
+  if ((uint32_t)d * s->chunk >= left)
     return drop(&r->stats.orphans);
   /* A frame of this packet was skipped: on an in-order link it is lost. */
   s->used = 0;
@@ -534,11 +541,12 @@ static void tx_put_encoded(hermc_link_tx* tx, uint8_t b) {
   tx_put(tx, b);
 }
 
-/* Frames the packet and counts its wire bytes; writes them too when
- * `write` (the caller checked that they fit). */
-static size_t tx_frames(hermc_link_tx* tx, const uint8_t* pkt, size_t len,
+/* Frames the packet cut by `f` and counts its wire bytes; writes them too
+ * when `write` (the caller checked that they fit). Counting stops past
+ * HERMC_TX_RING: such a packet cannot fit. */
+static size_t tx_frames(hermc_link_tx* tx, const hermc_frag* start,
                         bool write) {
-  hermc_frag f;
+  hermc_frag f = *start;
   uint8_t raw[HERMC_MTU + 2];
   uint8_t enc[HERMC_COBS_MAX(HERMC_MTU + 2u)];
   size_t n;
@@ -548,7 +556,6 @@ static size_t tx_frames(hermc_link_tx* tx, const uint8_t* pkt, size_t len,
       tx_put(tx, DELIMITER);
     ++total;
   }
-  hermc_frag_begin(&f, pkt, len, HERMC_MTU, tx->tag);
   while ((n = hermc_frag_next(&f, raw)) != 0) {
     uint16_t crc = hermc_crc16(HERMC_CRC16_INIT, raw, n);
     size_t k;
@@ -565,25 +572,27 @@ static size_t tx_frames(hermc_link_tx* tx, const uint8_t* pkt, size_t len,
       tx_put(tx, DELIMITER);
     ++total;
     if (total > HERMC_TX_RING)
-      return total; /* cannot fit: stop counting */
+      return total;
   }
   return total;
 }
 
 int hermc_link_tx_packet(hermc_link_tx* tx, const uint8_t* pkt, size_t len) {
+  hermc_frag f;
   size_t need;
-  if (hermc_link_tx_wire_bound(len, tx->escaped != 0) == 0) {
+  /* One fragmenter state (and one CRC-32) serves both passes. */
+  if (hermc_frag_begin(&f, pkt, len, HERMC_MTU, tx->tag) != HERMC_OK) {
     ++tx->refused;
     return HERMC_ERR_TOO_BIG;
   }
-  need = tx_frames(tx, pkt, len, false);
+  need = tx_frames(tx, &f, false);
   if (need > hermc_link_tx_free(tx)) {
     ++tx->refused;
     /* Into an empty ring it also takes the leading delimiter. */
     return need + (tx->count != 0 ? 1u : 0u) > HERMC_TX_RING ? HERMC_ERR_TOO_BIG
                                                              : HERMC_ERR_FULL;
   }
-  tx_frames(tx, pkt, len, true);
+  (void)tx_frames(tx, &f, true);
   tx->tag = (uint8_t)((tx->tag + 1u) & 0x03u);
   ++tx->packets;
   return HERMC_OK;

@@ -102,8 +102,8 @@ size_t hermc_leb128_size(uint32_t v);
  *  frame was produced, so the caller keeps it unchanged until then. */
 typedef struct hermc_frag {
   const uint8_t* pkt;
-  uint32_t len;      /* packet bytes */
-  uint32_t off;      /* next stream byte to send (stream = packet || CRC) */
+  size_t len;        /* packet bytes */
+  size_t off;        /* next stream byte to send (stream = packet || CRC) */
   uint32_t crc;      /* CRC-32 of the packet, appended little endian */
   uint16_t mtu;
   uint16_t index;    /* next frame index */
@@ -114,7 +114,9 @@ typedef struct hermc_frag {
 /** Starts cutting `pkt[0..len)` with packet tag `tag` (0..3; the caller
  *  advances its tag by one, mod 4, per packet: hermc_link_tx and hermc_can
  *  do). Returns HERMC_ERR_TOO_BIG (and produces no frame) when len >
- *  HERMC_MAX_ANNOUNCED, HERMC_ERR_ARG when mtu < 8; O(len) for the CRC. */
+ *  HERMC_MAX_ANNOUNCED, or where size_t is 16 bits (AVR) when len >
+ *  SIZE_MAX - 4 (the stream, packet and CRC-32, is counted in size_t);
+ *  HERMC_ERR_ARG when mtu < 8. O(len) for the CRC. */
 int hermc_frag_begin(hermc_frag* f, const uint8_t* pkt, size_t len,
                      uint16_t mtu, uint8_t tag);
 
