@@ -4,7 +4,7 @@
 #
 #   apps/bench/run-all.sh                 the full suite (about 20 minutes),
 #                                         3 repetitions, updates the docs
-#   apps/bench/run-all.sh --quick         everything once, short (about 2
+#   apps/bench/run-all.sh --quick         everything once, short (about 3
 #                                         minutes): tests the pipeline and
 #                                         writes to DIR only
 #
@@ -20,8 +20,9 @@
 #   --build-dir DIR   build directory (default build-bench)
 #   --jobs N          parallel build jobs (default 2)
 #   --only LIST       run only these, comma-separated: can, serial, emu,
-#                     fragmentation, routing, rtt, footprint (the report
-#                     uses whatever DIR holds)
+#                     fragmentation, routing, rtt, footprint, mcu (the
+#                     report uses whatever DIR holds; mcu's figures go to
+#                     docs/performance.md by hand, see its issue-17 section)
 #   --no-build        use the binaries already in the build directory
 #
 # Every benchmark runs even when another fails; the exit status is 1 when
@@ -42,7 +43,7 @@ quick=0
 docs=
 build=build-bench
 jobs=2
-only=can,serial,emu,fragmentation,routing,rtt,footprint
+only=can,serial,emu,fragmentation,routing,rtt,footprint,mcu
 do_build=1
 usage() { sed -n '2,/^set -uo/p' "$0" | sed '$d; s/^# \{0,1\}//'; }
 while [ $# -gt 0 ]; do
@@ -87,6 +88,7 @@ if [ $do_build = 1 ]; then
     && cmake --build "$root/$build" -j"$jobs" --target bench_can_efficiency \
          bench_serial_goodput bench_emu_bandwidth bench_fragmentation \
          bench_routing_convergence herm-bench-rtt hermd bench_idle_peer \
+         bench_mcu_board \
          >>"$out/build.log" 2>&1 \
     || { echo "run-all.sh: build failed, see $out/build.log" >&2; tail -20 "$out/build.log" >&2; exit 1; }
 fi
@@ -130,6 +132,10 @@ run can can_efficiency.json "$bin/bench_can_efficiency" "${gbench[@]}" \
   --benchmark_out="$out/can_efficiency.json"
 run serial serial_goodput.json "$bin/bench_serial_goodput" "${gbench[@]}" \
   --benchmark_out="$out/serial_goodput.json"
+# The C client (herm-mcu-board) on a 19,200 baud cable next to a C++ module:
+# fixed counts, about 45 s, the same in --quick.
+run mcu mcu_board.json "$bin/bench_mcu_board" "${gbench[@]}" \
+  --benchmark_out="$out/mcu_board.json"
 run emu emu_bandwidth.json "$bin/bench_emu_bandwidth" "${gbench[@]}" \
   --benchmark_out="$out/emu_bandwidth.json"
 run fragmentation fragmentation.json "$bin/bench_fragmentation" "${gbench[@]}" \
