@@ -133,7 +133,7 @@ run can can_efficiency.json "$bin/bench_can_efficiency" "${gbench[@]}" \
 run serial serial_goodput.json "$bin/bench_serial_goodput" "${gbench[@]}" \
   --benchmark_out="$out/serial_goodput.json"
 # The C client (herm-mcu-board) on a 19,200 baud cable next to a C++ module:
-# fixed counts, about 45 s, the same in --quick.
+# fixed counts, about 45 s per repetition (--quick: one).
 run mcu mcu_board.json "$bin/bench_mcu_board" "${gbench[@]}" \
   --benchmark_out="$out/mcu_board.json"
 run emu emu_bandwidth.json "$bin/bench_emu_bandwidth" "${gbench[@]}" \
