@@ -176,11 +176,11 @@ public:
   board_process& operator=(const board_process&) = delete;
 
   ~board_process() {
-    if (pid_ <= 0)
+    if (pid_ <= 0 || !running())
       return;
     ::kill(pid_, SIGTERM);
     for (int i = 0; i < 200; ++i) {
-      if (::waitpid(pid_, nullptr, WNOHANG) == pid_)
+      if (::waitpid(pid_, nullptr, WNOHANG) != 0)
         return;
       std::this_thread::sleep_for(10ms);
     }
@@ -192,9 +192,11 @@ public:
     return pid_ > 0;
   }
 
-  /// False once the process ended.
-  bool running() const {
-    return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0;
+  /// False once the process ended (then reaped: never signalled again).
+  bool running() {
+    if (pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) != 0)
+      pid_ = -1;
+    return pid_ > 0;
   }
 
 private:
