@@ -27,21 +27,13 @@
 #include "hermc_can.h"
 #include "hermc_link.h"
 #include "tests/fuzz/fuzz_support.hpp"
+#include "tests/mcu/mcu_bytes.hpp"
 
 namespace {
 
 using bytes = std::vector<uint8_t>;
 
-struct sink {
-  std::vector<bytes> packets;
-  std::vector<uint8_t> sources;
-
-  static void on_packet(void* ctx, uint8_t src, const uint8_t* pkt, size_t len) {
-    auto* self = static_cast<sink*>(ctx);
-    self->packets.emplace_back(pkt, pkt + len);
-    self->sources.push_back(src);
-  }
-};
+using sink = mcu_test::packet_sink;
 
 bool same_stats(const hermc_link_rx& a, const hermc_link_rx& b) {
   return std::memcmp(&a.frame_stats, &b.frame_stats, sizeof a.frame_stats) == 0

@@ -18,22 +18,14 @@
 #include "channels/reassembler.hpp"
 #include "hermc_can.h"
 #include "hermc_link.h"
+#include "tests/mcu/mcu_bytes.hpp"
 
 namespace {
 
 using bytes = std::vector<uint8_t>;
 using herm::byte_buffer;
 
-struct sink {
-  std::vector<bytes> packets;
-  std::vector<uint8_t> sources;
-
-  static void on_packet(void* ctx, uint8_t src, const uint8_t* pkt, size_t len) {
-    auto* self = static_cast<sink*>(ctx);
-    self->packets.emplace_back(pkt, pkt + len);
-    self->sources.push_back(src);
-  }
-};
+using sink = mcu_test::packet_sink;
 
 std::vector<bytes> random_packets(uint32_t seed, size_t count, size_t max) {
   std::mt19937 rng(seed);

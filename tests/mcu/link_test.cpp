@@ -12,6 +12,7 @@
 
 #include "hermc_can.h"
 #include "hermc_link.h"
+#include "tests/mcu/mcu_bytes.hpp"
 
 namespace {
 
@@ -25,16 +26,7 @@ bytes iota_bytes(size_t n, uint8_t first = 0) {
 }
 
 // Collects delivered packets with their source.
-struct sink {
-  std::vector<bytes> packets;
-  std::vector<uint8_t> sources;
-
-  static void on_packet(void* ctx, uint8_t src, const uint8_t* pkt, size_t len) {
-    auto* self = static_cast<sink*>(ctx);
-    self->packets.emplace_back(pkt, pkt + len);
-    self->sources.push_back(src);
-  }
-};
+using sink = mcu_test::packet_sink;
 
 // All frames of one packet at `mtu` with `tag`.
 std::vector<bytes> frames_of(const bytes& pkt, uint16_t mtu, uint8_t tag = 0) {

@@ -33,6 +33,19 @@ inline bytes hex(const std::string& text) {
   return out;
 }
 
+/// Collects the packets a receiver delivers, with their source: its
+/// on_packet is the link layer's callback (hermc_link.h), `this` its ctx.
+struct packet_sink {
+  std::vector<bytes> packets;
+  std::vector<uint8_t> sources;
+
+  static void on_packet(void* ctx, uint8_t src, const uint8_t* pkt, size_t len) {
+    auto* self = static_cast<packet_sink*>(ctx);
+    self->packets.emplace_back(pkt, pkt + len);
+    self->sources.push_back(src);
+  }
+};
+
 /// The first `n` bytes of `p` as a vector.
 inline bytes take(const uint8_t* p, size_t n) {
   return bytes(p, p + n);
