@@ -46,9 +46,20 @@ static int bytes_equal(struct hermc_bytes b, const char *s) {
 
 /* -- sending ------------------------------------------------------------------ */
 
-/* Sends scratch[0..len) on the link. */
+/* Sends scratch[0..len) on the link; keyed, signed when it must be (a
+ * packet without room for the trailer is dropped: tx_dropped). */
 static int send_scratch(struct hermc_module *m, size_t len) {
-  int rc = hermc_link_tx_packet(&m->tx, m->scratch, len);
+  int rc;
+#if HERMC_AUTH
+  if (m->keyed && len > 0 && hermc_auth_must_sign(&m->auth, m->scratch, len)
+      && (len = hermc_auth_sign(&m->auth, m->scratch, len, HERMC_MAX_PACKET,
+                                HERMC_LINK_RS232C))
+           == 0) {
+    ++m->counters.tx_dropped;
+    return HERMC_ERR_TOO_BIG;
+  }
+#endif
+  rc = hermc_link_tx_packet(&m->tx, m->scratch, len);
   if (rc != HERMC_OK) {
     ++m->counters.tx_dropped;
     return rc;
@@ -90,8 +101,15 @@ static int send_data(struct hermc_module *m, uint16_t dst, int flooded,
   return send_scratch(m, at + body);
 }
 
-/* Room for an APO message after a header of `at` bytes. */
-static size_t body_cap(size_t at) {
+/* Room for an APO message after a header of `at` bytes (keyed: and the
+ * trailer, whether or not this packet needs one). */
+static size_t body_cap(const struct hermc_module *m, size_t at) {
+#if HERMC_AUTH
+  if (m->keyed)
+    return (size_t)HERMC_MAX_PACKET - at - hermc_auth_trailer_size(&m->auth);
+#else
+  (void)m;
+#endif
   return (size_t)HERMC_MAX_PACKET - at;
 }
 
@@ -130,7 +148,7 @@ static void send_advertise(struct hermc_module *m, uint8_t t) {
   const char *name = m->topics[t].name;
   if (send_data(m, HERMC_BROADCAST, 1,
                 hermc_asl_advertise_encode(name, cstr_len(name),
-                                           m->scratch + at, body_cap(at)))
+                                           m->scratch + at, body_cap(m, at)))
       == HERMC_OK)
     m->topics[t].advertised = 1;
 }
@@ -142,7 +160,7 @@ static void send_query(struct hermc_module *m, struct hermc_remote_slot *r) {
   (void)send_data(m, HERMC_BROADCAST, 1,
                   hermc_asl_query_encode(r->query_id, HERMC_BY_NAME, r->name,
                                          cstr_len(r->name), m->scratch + at,
-                                         body_cap(at)));
+                                         body_cap(m, at)));
 }
 
 /* Contexts are short: on an AVR every string literal also takes RAM. */
@@ -152,7 +170,7 @@ static void send_error(struct hermc_module *m, uint16_t dst, uint64_t rid,
   (void)send_data(m, dst, 0,
                   hermc_asl_response_error_encode(
                     rid, HERMC_ERROR_CATEGORY_HERM, code, context,
-                    cstr_len(context), m->scratch + at, body_cap(at)));
+                    cstr_len(context), m->scratch + at, body_cap(m, at)));
 }
 
 /* -- remote APOs ------------------------------------------------------------- */
@@ -241,23 +259,23 @@ static void on_query(struct hermc_module *m, uint16_t src,
     if (!apo_matches(a, q))
       continue;
     if (count == 0)
-      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(at));
+      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(m, at));
     n = hermc_asl_answer_entry_encode((uint32_t)i + 1u, a->name,
                                       cstr_len(a->name), a->type,
                                       cstr_len(a->type),
                                       m->scratch + at + len,
-                                      body_cap(at) - len);
+                                      body_cap(m, at) - len);
     if (n == 0 && count > 0) {
       /* Full: send what we have, start another answer with this APO. */
       m->scratch[at + 6] = count;
       (void)send_data(m, src, 0, len);
       count = 0;
-      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(at));
+      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(m, at));
       n = hermc_asl_answer_entry_encode((uint32_t)i + 1u, a->name,
                                         cstr_len(a->name), a->type,
                                         cstr_len(a->type),
                                         m->scratch + at + len,
-                                        body_cap(at) - len);
+                                        body_cap(m, at) - len);
     }
     if (n == 0) {
       ++m->counters.tx_dropped; /* one entry alone does not fit a packet */
@@ -298,7 +316,7 @@ static void on_request(struct hermc_module *m, uint16_t src,
   uint8_t code;
   ++m->counters.requests_served;
   code = a->handler(a->ctx, x->payload.data, x->payload.size,
-                    m->scratch + at + 11u, body_cap(at) - 11u, &resp_len);
+                    m->scratch + at + 11u, body_cap(m, at) - 11u, &resp_len);
   if (x->oneway) {
     /* One-way: a reliable one is acknowledged, a plain one not at all.
      * (No duplicate cache: a retransmitted copy reaches the handler again.) */
@@ -306,7 +324,7 @@ static void on_request(struct hermc_module *m, uint16_t src,
     if (x->kind == HERMC_ASL_RELIABLE_REQUEST)
       (void)send_data(m, src, 0,
                       hermc_asl_ack_encode(x->request_id, m->scratch + at,
-                                           body_cap(at)));
+                                           body_cap(m, at)));
 #endif
     return;
   }
@@ -314,7 +332,7 @@ static void on_request(struct hermc_module *m, uint16_t src,
     send_error(m, src, x->request_id, code, "refused");
     return;
   }
-  if (resp_len > body_cap(at) - 11u) {
+  if (resp_len > body_cap(m, at) - 11u) {
     send_error(m, src, x->request_id, HERMC_EC_INVALID_PARAMETER,
                "too large");
     return;
@@ -445,7 +463,13 @@ static void on_data(struct hermc_module *m, const uint8_t *p, size_t n) {
     ++m->counters.rx_malformed;
     return;
   }
+  /* Keyed, flag A says the trailer was verified (and cut off); without a
+   * key, where the payload ends is unknown. */
+#if HERMC_AUTH
+  if (h.authenticated && !m->keyed) {
+#else
   if (h.authenticated) {
+#endif
     ++m->counters.rx_auth_unsupported;
     return;
   }
@@ -529,10 +553,43 @@ static void on_seqno_request(struct hermc_module *m, const uint8_t *p,
   send_update(m);
 }
 
+#if HERMC_AUTH
+/* Checks p[0..*n) (routing/agent_auth.cpp `authenticate`): 1 when it is
+ * handled further, its first *n bytes; 0 when dropped (counted in
+ * m->auth.counters). Our challenge and our reply to the neighbour's (then
+ * our hello, as the C++ sends it) go out at once, already signed. */
+static int authenticate(struct hermc_module *m, const uint8_t *p, size_t *n) {
+  struct hermc_auth_out *o = &m->auth_out;
+  size_t body = 0;
+  int pass = hermc_auth_receive(&m->auth, p, *n, HERMC_LINK_RS232C, m->now_ms,
+                                &body, o);
+  if (o->challenge_len > 0) {
+    if (hermc_link_tx_packet(&m->tx, o->challenge, o->challenge_len)
+        == HERMC_OK)
+      ++m->counters.tx_packets;
+    else
+      ++m->counters.tx_dropped;
+  }
+  if (o->reply_len > 0) {
+    if (hermc_link_tx_packet(&m->tx, o->reply, o->reply_len) == HERMC_OK)
+      ++m->counters.tx_packets;
+    else
+      ++m->counters.tx_dropped;
+    send_hello(m, m->cfg.hello_interval_ms);
+  }
+  *n = body;
+  return pass;
+}
+#endif
+
 void hermc_handle_packet(struct hermc_module *m, const uint8_t *p,
                          size_t n) {
   enum hermc_packet_type t;
   ++m->counters.rx_packets;
+#if HERMC_AUTH
+  if (m->keyed && !authenticate(m, p, &n))
+    return;
+#endif
   if (hermc_peek_type(p, n, &t) != HERMC_NET_OK) {
     ++m->counters.rx_malformed;
     return;
@@ -657,6 +714,22 @@ void hermc_tick(struct hermc_module *m, uint32_t now_ms) {
 #endif
 }
 
+#if HERMC_AUTH
+int hermc_set_key(struct hermc_module *m, const uint8_t *key, size_t key_len,
+                  uint8_t key_id, uint8_t tag_bytes, uint8_t data_all,
+                  uint32_t index) {
+  m->keyed = 0;
+  if (hermc_auth_init(&m->auth, key, key_len, tag_bytes, index,
+                      m->cfg.instance)
+      != 0)
+    return HERMC_ERR_ARG;
+  m->auth.key_id = key_id;
+  m->auth.data_all = data_all != 0;
+  m->keyed = 1;
+  return HERMC_OK;
+}
+#endif
+
 int hermc_register_apo(struct hermc_module *m, const char *name,
                        const char *type, hermc_handler handler, void *ctx) {
   if (!handler || !name || !type || cstr_len(name) > HERMC_ASL_MAX_STRING
@@ -713,7 +786,7 @@ int hermc_request(struct hermc_module *m, int r, const uint8_t *payload,
     return HERMC_ERR_NOT_READY;
   }
   at = body_at(rem->module, 0);
-  if (len > body_cap(at) - 14u)
+  if (len > body_cap(m, at) - 14u)
     return HERMC_ERR_TOO_BIG;
   if (fn) {
     for (i = 0; i < HERMC_MAX_PENDING && !slot; ++i)
@@ -770,7 +843,7 @@ int hermc_publish(struct hermc_module *m, int t, const uint8_t *payload,
   topic = &m->topics[t];
   name = topic->name;
   name_len = cstr_len(name);
-  if (7u + name_len + len > body_cap(HERMC_DATA_HEADER_SIZE))
+  if (7u + name_len + len > body_cap(m, HERMC_DATA_HEADER_SIZE))
     return HERMC_ERR_TOO_BIG;
   ++topic->seq;
   for (i = 0; i < HERMC_MAX_SUBSCRIBERS; ++i) {
@@ -780,7 +853,7 @@ int hermc_publish(struct hermc_module *m, int t, const uint8_t *payload,
       continue;
     at = body_at(s->module, 0);
     h = hermc_asl_publish_header(name, name_len, topic->seq, m->scratch + at,
-                                 body_cap(at));
+                                 body_cap(m, at));
     for (k = 0; k < len; ++k)
       m->scratch[at + h + k] = payload[k];
     if (send_data(m, s->module, 0, h + len) == HERMC_OK) {

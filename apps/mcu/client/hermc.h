@@ -40,6 +40,9 @@
 #include "hermc_link.h"
 #include "hermc_net.h"
 #include "hermc_asl.h"
+#if HERMC_AUTH
+#include "hermc_auth.h"
+#endif
 
 #ifdef __cplusplus
 extern "C" {
@@ -165,7 +168,10 @@ struct hermc_counters {
                                  requests for others, goodbyes of others */
   hermc_count_t rx_not_for_us;     /* data for another module: a leaf never
                                  forwards */
-  hermc_count_t rx_auth_unsupported; /* data with flag A (no HERMC_AUTH here) */
+  hermc_count_t rx_auth_unsupported; /* data with flag A, and no key (no
+                                 HERMC_AUTH, or hermc_set_key not called):
+                                 where its payload ends is unknown. With a
+                                 key, refusals are in m->auth.counters */
   hermc_count_t rx_flood_duplicates; /* floods seen before (or our own) */
   hermc_count_t flood_evictions;   /* remembered floods replaced while younger
                                  than HERMC_FLOOD_MEMORY_MS (table full) */
@@ -225,6 +231,11 @@ struct hermc_module {
   struct hermc_subscriber subscribers[HERMC_MAX_SUBSCRIBERS];
 #endif
   struct hermc_flood floods[HERMC_FLOOD_CACHE];
+#if HERMC_AUTH
+  uint8_t keyed;            /* hermc_set_key succeeded */
+  struct hermc_auth auth;   /* its counters: what was signed and refused */
+  struct hermc_auth_out auth_out;
+#endif
   /* Scratch: one outgoing packet is built here, then framed into tx. */
   uint8_t scratch[HERMC_MAX_PACKET];
 };
@@ -293,6 +304,31 @@ int hermc_topic(struct hermc_module *m, const char *name);
 int hermc_publish(struct hermc_module *m, int t, const uint8_t *payload,
                   size_t len);
 #endif /* HERMC_TOPICS */
+
+#if HERMC_AUTH
+/** Keys the module for a keyed network (hermd's `auth` section; every
+ *  setting must match the network's): `key[0..key_len)` (16..64 bytes,
+ *  copied into HMAC pads; the caller may wipe its copy), `key_id` (0..255),
+ *  `tag_bytes` (8 or 16), `data_all` (0: hermd's `data: discovery`, 1:
+ *  `data: all`), and `index`, this boot's sender index: it must differ from
+ *  boot to boot (a random number; a repeated index restarts the packet
+ *  counter at 1 and a neighbour that remembers it refuses its packets as
+ *  replays for up to HERMC_AUTH_FORGET_MS). Call after hermc_init and
+ *  before the first hermc_tick. From then on:
+ *   - every control packet, broadcast and discovery answer (every data
+ *     packet with data_all) leaves with a trailer (hermc_auth_must_sign);
+ *     APO payloads have hermc_auth_trailer_size() bytes less room;
+ *   - every received packet is checked first (hermc_auth_receive): packets
+ *     with a wrong key, a replayed counter, or that must be signed and are
+ *     not, are dropped and counted in m->auth.counters; a right tag from an
+ *     index not known yet is challenged (RFC 8967), and the neighbour's
+ *     challenges are answered, followed by a hello.
+ *  HERMC_ERR_ARG (and the module stays unkeyed) for a NULL key, a key
+ *  length outside 16..64, or a tag length other than 8 or 16. O(1). */
+int hermc_set_key(struct hermc_module *m, const uint8_t *key, size_t key_len,
+                  uint8_t key_id, uint8_t tag_bytes, uint8_t data_all,
+                  uint32_t index);
+#endif /* HERMC_AUTH */
 
 /** Handles one network packet `pkt[0..len)` as if the link had delivered
  *  it (the link calls this; tests and CAN boards may too). */

@@ -48,6 +48,19 @@
 #define HERMC_RELIABLE 1
 #endif
 
+/* Authentication (docs/protocol.md, "Authentication"; hermc_auth.h): the
+ * module signs what a keyed network must sign and checks every packet it
+ * receives, once the application gives it the network's key
+ * (hermc_set_key). 0 (default): hermc_set_key does not exist, nothing is
+ * signed, data packets with flag A are counted in rx_auth_unsupported; the
+ * library is smaller by the SHA-256 and authentication code (docs/mcu.md).
+ * With 1 and no key set the module behaves as with 0. RAM: a struct
+ * hermc_auth and a struct hermc_auth_out in the module (about 330 bytes on
+ * AVR with hermc_auth.h's default bounds). */
+#ifndef HERMC_AUTH
+#define HERMC_AUTH 0
+#endif
+
 /* Width of every counter (module, link, reassembler): 32 bits by default;
  * 16 halves their RAM and their arithmetic on an 8-bit core, and they wrap
  * at 65535 (read them as differences). */
@@ -193,8 +206,8 @@ typedef uint16_t hermc_count_t;
 #error "HERMC_MAX_APOS must be 0..255; _REMOTES, _PENDING, _TOPICS, _SUBSCRIBERS and HERMC_FLOOD_CACHE 1..255"
 #endif
 #if (HERMC_TOPICS != 0 && HERMC_TOPICS != 1) || (HERMC_ESCAPED != 0 && HERMC_ESCAPED != 1) \
-  || (HERMC_RELIABLE != 0 && HERMC_RELIABLE != 1)
-#error "HERMC_TOPICS, HERMC_ESCAPED and HERMC_RELIABLE must be 0 or 1"
+  || (HERMC_RELIABLE != 0 && HERMC_RELIABLE != 1) || (HERMC_AUTH != 0 && HERMC_AUTH != 1)
+#error "HERMC_TOPICS, HERMC_ESCAPED, HERMC_RELIABLE and HERMC_AUTH must be 0 or 1"
 #endif
 #if HERMC_MAX_PACKET < 64
 #error "the module needs HERMC_MAX_PACKET of at least 64 (a hello, an update, a discovery answer)"
