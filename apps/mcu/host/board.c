@@ -18,6 +18,17 @@
  *                    APO, as a request that waits for its response.
  *   --count N        stops after N publications or readings (0: never).
  *
+ * Built with HERMC_AUTH=1 (herm-mcu-board-keyed), it joins a keyed network
+ * (hermd's `auth` section, docs/user-guide.md) with the same settings:
+ *   --key-file PATH  the network's key file, as hermd reads it: 16..64 bytes
+ *                    as hex digits on one line, a regular file (not a
+ *                    symbolic link) owned by this user, mode 0600 or 0400;
+ *                    anything else is refused with the reason (exit 2).
+ *   --key-id N       0..255 (default 1);  --tag-bytes 8|16 (default 8);
+ *   --auth-data discovery|all (default discovery).
+ * Its sender index is drawn from /dev/urandom at start (one per boot).
+ * Without --key-file it runs unkeyed.
+ *
  * Prints one flushed line per event: "ready ID", "neighbour MID",
  * "served N", "published N subscribers S", "sent N", "response N ok",
  * "response N error CODE", "response N timeout", "not ready N", "counters
@@ -25,6 +36,7 @@
  * failed, 2 bad arguments. */
 #define _DEFAULT_SOURCE
 #include <errno.h>
+#include <sys/stat.h>
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
@@ -139,6 +151,87 @@ static void on_response(void *ctx, enum hermc_status status,
   fflush(stdout);
 }
 
+#if HERMC_AUTH
+/* The value of hex digit c, or -1. */
+static int hex_value(char c) {
+  if (c >= '0' && c <= '9')
+    return c - '0';
+  if (c >= 'a' && c <= 'f')
+    return c - 'a' + 10;
+  if (c >= 'A' && c <= 'F')
+    return c - 'A' + 10;
+  return -1;
+}
+
+/* Reads a key file by hermd's rules (routing/auth.cpp read_key) into
+ * key[0..64); returns its length, or 0 after printing why it is refused. */
+static size_t read_key_file(const char *path, uint8_t key[HERMC_AUTH_KEY_MAX]) {
+  char text[1025];
+  size_t got = 0, n, i;
+  struct stat st;
+  int fd = open(path, O_RDONLY | O_NOFOLLOW | O_CLOEXEC | O_NOCTTY | O_NONBLOCK);
+  if (fd < 0) {
+    printf("error %s: key file %s\n", path,
+           errno == ELOOP ? "is a symbolic link (name the file itself)"
+                          : strerror(errno));
+    return 0;
+  }
+  const char *why = NULL;
+  if (fstat(fd, &st) != 0)
+    why = "cannot be examined";
+  else if (!S_ISREG(st.st_mode))
+    why = "is not a regular file";
+  else if (st.st_uid != geteuid())
+    why = "is not owned by this user";
+  else if ((st.st_mode & 077) != 0)
+    why = "may be accessed by group or others (chmod 600)";
+  else if (st.st_size > 1024)
+    why = "is larger than 1024 bytes";
+  while (why == NULL && got < sizeof text - 1) {
+    ssize_t r = read(fd, text + got, sizeof text - 1 - got);
+    if (r < 0 && errno == EINTR)
+      continue;
+    if (r <= 0)
+      break;
+    got += (size_t)r;
+  }
+  close(fd);
+  if (got > 0 && text[got - 1] == '\n')
+    --got;
+  if (got > 0 && text[got - 1] == '\r')
+    --got;
+  for (i = 0; why == NULL && i < got; ++i)
+    if (hex_value(text[i]) < 0)
+      why = "must hold hex digits only";
+  n = got / 2;
+  if (why == NULL && (got % 2 != 0 || n < HERMC_AUTH_KEY_MIN || n > HERMC_AUTH_KEY_MAX))
+    why = "must hold 16 to 64 bytes as an even number of hex digits";
+  if (why != NULL) {
+    memset(text, 0, sizeof text);
+    printf("error %s: key file %s\n", path, why);
+    return 0;
+  }
+  for (i = 0; i < n; ++i)
+    key[i] = (uint8_t)(hex_value(text[2 * i]) << 4 | hex_value(text[2 * i + 1]));
+  memset(text, 0, sizeof text);
+  return n;
+}
+
+/* This boot's sender index: random, as the C++ draws it. */
+static uint32_t random_index(uint64_t fallback) {
+  uint32_t x = (uint32_t)(fallback ^ (fallback >> 32));
+  int fd = open("/dev/urandom", O_RDONLY | O_CLOEXEC);
+  if (fd >= 0) {
+    uint8_t b[4];
+    if (read(fd, b, sizeof b) == (ssize_t)sizeof b)
+      x = (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16
+          | (uint32_t)b[3] << 24;
+    close(fd);
+  }
+  return x;
+}
+#endif /* HERMC_AUTH */
+
 static void print_counters(const struct hermc_module *m) {
   const struct hermc_counters *c = &m->counters;
   printf("counters rx_packets %lu rx_malformed %lu rx_asl_malformed %lu "
@@ -156,6 +249,17 @@ static void print_counters(const struct hermc_module *m) {
          (unsigned long)c->tx_packets, (unsigned long)c->tx_dropped,
          (unsigned long)c->tx_hellos,
          (unsigned long)c->neighbour_changes);
+#if HERMC_AUTH
+  const struct hermc_auth_counters *a = &m->auth.counters;
+  printf("auth signed %lu accepted %lu truncated %lu wrong_key_id %lu "
+         "bad_tag %lu replayed %lu unsigned %lu challenges_sent %lu "
+         "challenges_passed %lu replies %lu\n",
+         (unsigned long)a->signed_packets, (unsigned long)a->accepted,
+         (unsigned long)a->truncated, (unsigned long)a->wrong_key_id,
+         (unsigned long)a->bad_tag, (unsigned long)a->replayed,
+         (unsigned long)a->rx_unsigned, (unsigned long)a->challenges_sent,
+         (unsigned long)a->challenges_passed, (unsigned long)a->replies);
+#endif
   fflush(stdout);
 }
 
@@ -164,7 +268,10 @@ static int usage(const char *why) {
   fprintf(stderr,
           "usage: herm-mcu-board --device PATH [--baud N] [--id ID] "
           "[--echo NAME] [--publish TOPIC] [--send APO] [--period-ms N] "
-          "[--count N] [--max-seconds S]\n");
+          "[--count N] [--max-seconds S]%s\n",
+          HERMC_AUTH ? " [--key-file PATH] [--key-id N] [--tag-bytes 8|16] "
+                       "[--auth-data discovery|all]"
+                     : "");
   return 2;
 }
 
@@ -217,6 +324,10 @@ int main(int argc, char **argv) {
   const char *device = NULL, *echo = NULL, *topic = NULL, *send_to = NULL;
   unsigned long baud = 19200, id = 0x0A04, period_ms = 1000, count = 0;
   unsigned long max_seconds = 0;
+#if HERMC_AUTH
+  const char *key_file = NULL;
+  unsigned long key_id = 1, tag_bytes = 8, data_all = 0;
+#endif
   for (int i = 1; i < argc; ++i) {
     const char *a = argv[i];
     const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -246,6 +357,20 @@ int main(int argc, char **argv) {
     } else if (strcmp(a, "--max-seconds") == 0) {
       if (!parse_ulong(v, 86400, &max_seconds))
         return usage("--max-seconds: a number");
+#if HERMC_AUTH
+    } else if (strcmp(a, "--key-file") == 0) {
+      key_file = v;
+    } else if (strcmp(a, "--key-id") == 0) {
+      if (!parse_ulong(v, 255, &key_id))
+        return usage("--key-id: 0 .. 255");
+    } else if (strcmp(a, "--tag-bytes") == 0) {
+      if (!parse_ulong(v, 16, &tag_bytes) || (tag_bytes != 8 && tag_bytes != 16))
+        return usage("--tag-bytes: 8 or 16");
+    } else if (strcmp(a, "--auth-data") == 0) {
+      if (strcmp(v, "discovery") != 0 && strcmp(v, "all") != 0)
+        return usage("--auth-data: discovery or all");
+      data_all = strcmp(v, "all") == 0;
+#endif
     } else {
       return usage("unknown option");
     }
@@ -273,6 +398,21 @@ int main(int argc, char **argv) {
     close(fd);
     return usage("the module's configuration is refused");
   }
+#if HERMC_AUTH
+  if (key_file != NULL) {
+    uint8_t key[HERMC_AUTH_KEY_MAX];
+    size_t key_len = read_key_file(key_file, key);
+    int rc = key_len == 0 ? HERMC_ERR_ARG
+                          : hermc_set_key(&module, key, key_len, (uint8_t)key_id,
+                                          (uint8_t)tag_bytes, (uint8_t)data_all,
+                                          random_index(instance));
+    memset(key, 0, sizeof key);
+    if (rc != HERMC_OK) {
+      close(fd);
+      return usage("--key-file: the key is refused");
+    }
+  }
+#endif
   if (echo != NULL && hermc_register_apo(&module, echo, "echo", echo_handler,
                                          NULL) < 0) {
     close(fd);
@@ -280,7 +420,11 @@ int main(int argc, char **argv) {
   }
   int t = topic != NULL ? hermc_topic(&module, topic) : -1;
   int r = send_to != NULL ? hermc_remote(&module, send_to) : -1;
+#if HERMC_AUTH
+  printf("ready 0x%04lX%s\n", id, module.keyed ? " keyed" : "");
+#else
   printf("ready 0x%04lX\n", id);
+#endif
 
   uint32_t start = now_ms();
   uint32_t next_period = start + (uint32_t)period_ms;
