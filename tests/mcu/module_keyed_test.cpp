@@ -34,10 +34,17 @@ const bytes key = hex("00 11 22 33 44 55 66 77 88 99 AA BB CC DD EE FF "
 const bytes other_key = hex("FF EE DD CC BB AA 99 88 77 66 55 44 33 22 11 00 "
                             "F0 E1 D2 C3 B4 A5 96 87 78 69 5A 4B 3C 2D 1E 0F");
 
-/// The echo APO: answers with the request's payload.
+/// The echo APO: answers with the request's payload; a request of the one
+/// byte FF fills all the room it is given.
 uint8_t echo(void* ctx, const uint8_t* req, size_t n, uint8_t* resp,
              size_t cap, size_t* len) {
   ++*static_cast<int*>(ctx);
+  if (n == 1 && req[0] == 0xFF) {
+    for (size_t i = 0; i < cap; ++i)
+      resp[i] = 0xFF;
+    *len = cap;
+    return 0;
+  }
   if (n > cap)
     return HERMC_EC_QUEUE_FULL;
   for (size_t i = 0; i < n; ++i)
@@ -406,5 +413,12 @@ TEST_F(hermc_module_keyed_test, the_largest_signed_request_gets_its_signed_respo
   auto accepted = converse();
   ASSERT_EQ(accepted.size(), 1u);
   EXPECT_EQ(accepted[0].size(), 8u + 11u + room);
+  // A handler that fills all its room: the signed response is exactly
+  // HERMC_MAX_PACKET, sent, not dropped.
+  deliver(sign(data(peer_id, self_id, request(10, 1, {0xFF}))));
+  auto out = drain();
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_EQ(out[0].size(), size_t{HERMC_MAX_PACKET});
+  EXPECT_EQ(peer_receives(out[0]).size(), HERMC_MAX_PACKET - 21u);
   EXPECT_EQ(m.counters.tx_dropped, 0u);
 }
