@@ -7,9 +7,9 @@
 // Built twice (tests/mcu/CMakeLists.txt): against the default library
 // (hermc_module_test) and against the sonar firmware's configuration
 // (hermc_module_sonar_test: no topics, no escaped framing, no reliable
-// requests, no local APO, 16-bit counters, smaller bounds). The tests of a
-// feature a build leaves out are replaced by tests of what that build does
-// instead.
+// requests, one local APO, 16-bit counters, smaller bounds) and against a
+// build serving no APO (hermc_module_no_apos_test). The tests of a feature a
+// build leaves out are replaced by tests of what that build does instead.
 
 #include <gtest/gtest.h>
 
@@ -338,6 +338,75 @@ TEST_F(hermc_module_test, a_one_way_request_reaches_the_handler_without_response
 }
 
 #endif // HERMC_MAX_APOS > 0
+
+#if HERMC_MAX_APOS >= 3
+TEST_F(hermc_module_test, apos_that_do_not_fit_one_answer_go_in_the_next) {
+  // Two more APOs of 67-byte entries: with the fixture's (21 bytes) they
+  // need 155 bytes of entries, more than an answer holds (HERMC_MAX_PACKET
+  // less the data header and the answer's own 7 bytes).
+  static const std::string a(60, 'a'), b(60, 'b');
+  static_assert(HERMC_MAX_PACKET - 8 - 7 < 21 + 67 + 67,
+                "the three entries must not fit one answer");
+  static_assert(HERMC_MAX_PACKET - 8 - 7 >= 21 + 67,
+                "two entries must fit one answer");
+  ASSERT_EQ(hermc_register_apo(&m, a.c_str(), "t", echo, &calls), 2);
+  ASSERT_EQ(hermc_register_apo(&m, b.c_str(), "t", echo, &calls), 3);
+  start();
+  deliver(data(peer_id, 0xFFFF, query(5, HERMC_BY_ANY, ""), 90));
+  auto out = drain();
+  ASSERT_EQ(out.size(), 2u);
+  std::vector<uint32_t> apos;
+  for (const auto& s : out) {
+    ASSERT_EQ(s.asl.kind, HERMC_ASL_ANSWER);
+    EXPECT_EQ(s.asl.id32, 5u);
+    EXPECT_EQ(s.data.dst, peer_id);
+    hermc_asl_entry e{};
+    size_t at = 0;
+    while (hermc_asl_answer_entry(&s.asl, &at, &e))
+      apos.push_back(e.apo);
+  }
+  EXPECT_EQ(out[0].asl.count, 2u);
+  EXPECT_EQ(out[1].asl.count, 1u);
+  EXPECT_EQ(apos, (std::vector<uint32_t>{1, 2, 3}));
+  EXPECT_EQ(m.counters.tx_dropped, 0u);
+}
+#endif
+
+#if HERMC_MAX_APOS >= 2
+TEST_F(hermc_module_test, an_apo_whose_entry_alone_does_not_fit_is_left_out_and_counted) {
+  // An entry is 4 + 1 + name + 1 + type bytes: one byte more than the room
+  // of an answer (HERMC_MAX_PACKET less the data header and 7 bytes).
+  static const std::string big(HERMC_MAX_PACKET - 8 - 7 - 7 + 1, 'x');
+  ASSERT_EQ(hermc_register_apo(&m, big.c_str(), "t", echo, &calls), 2);
+  start();
+  deliver(data(peer_id, 0xFFFF, query(6, HERMC_BY_ANY, ""), 91));
+  auto out = drain();
+  ASSERT_EQ(out.size(), 1u); // the fixture's APO alone
+  EXPECT_EQ(out[0].asl.count, 1u);
+  EXPECT_EQ(m.counters.tx_dropped, 1u);
+}
+
+/// A handler that claims more response bytes than it was given room for.
+uint8_t overflowing(void*, const uint8_t*, size_t, uint8_t*, size_t cap,
+                    size_t* len) {
+  *len = cap + 1;
+  return 0;
+}
+
+TEST_F(hermc_module_test, a_response_larger_than_the_room_becomes_invalid_parameter) {
+  ASSERT_EQ(hermc_register_apo(&m, "big", "t", overflowing, nullptr), 2);
+  start();
+  deliver(data(peer_id, self_id, request(0x58, 2, hex("01"))));
+  auto out = drain();
+  ASSERT_EQ(out.size(), 1u);
+  ASSERT_EQ(out[0].asl.kind, HERMC_ASL_RESPONSE);
+  EXPECT_EQ(out[0].asl.request_id, 0x58u);
+  EXPECT_EQ(out[0].asl.ok, 0);
+  EXPECT_EQ(out[0].asl.err_category, HERMC_ERROR_CATEGORY_HERM);
+  EXPECT_EQ(out[0].asl.err_code, HERMC_EC_INVALID_PARAMETER);
+  EXPECT_EQ(m.counters.requests_served, 1u);
+}
+#endif
 
 #if HERMC_MAX_APOS == 0
 TEST_F(hermc_module_test, without_local_apos_no_query_is_answered_and_requests_get_apo_gone) {

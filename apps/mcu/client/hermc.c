@@ -36,6 +36,7 @@ static size_t cstr_len(const char *s) {
   return n;
 }
 
+HERMC_NOINLINE
 static int bytes_equal(struct hermc_bytes b, const char *s) {
   size_t i;
   for (i = 0; i < b.size; ++i)
@@ -176,6 +177,7 @@ static void send_error(struct hermc_module *m, uint16_t dst, uint64_t rid,
 /* -- remote APOs ------------------------------------------------------------- */
 
 /* Forgets where remote `r` is and asks again now. */
+HERMC_NOINLINE
 static void rediscover(struct hermc_module *m, struct hermc_remote_slot *r) {
   r->module = HERMC_NO_MODULE;
   r->apo = 0;
@@ -183,6 +185,7 @@ static void rediscover(struct hermc_module *m, struct hermc_remote_slot *r) {
   r->next_query_ms = m->now_ms;
 }
 
+HERMC_NOINLINE
 static void on_answer(struct hermc_module *m, uint16_t src,
                       const struct hermc_asl_msg *a) {
   uint8_t i;
@@ -247,10 +250,14 @@ static int apo_matches(const struct hermc_apo *a,
   return bytes_equal(q->text, q->by == HERMC_BY_NAME ? a->name : a->type);
 }
 
-/* Answers a query with every matching APO, as many per answer as fit. */
+/* Answers a query with every matching APO, as many per answer as fit: an
+ * entry that does not fit sends the answer so far and starts the next one
+ * with it. */
 static void on_query(struct hermc_module *m, uint16_t src,
                      const struct hermc_asl_msg *q) {
   size_t at = body_at(src, 0);
+  size_t cap = body_cap(m, at);
+  uint8_t *out = m->scratch + at;
   size_t len = 0;
   uint8_t i, count = 0;
   for (i = 0; i < m->napos; ++i) {
@@ -258,24 +265,18 @@ static void on_query(struct hermc_module *m, uint16_t src,
     size_t n;
     if (!apo_matches(a, q))
       continue;
-    if (count == 0)
-      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(m, at));
-    n = hermc_asl_answer_entry_encode((uint32_t)i + 1u, a->name,
-                                      cstr_len(a->name), a->type,
-                                      cstr_len(a->type),
-                                      m->scratch + at + len,
-                                      body_cap(m, at) - len);
-    if (n == 0 && count > 0) {
-      /* Full: send what we have, start another answer with this APO. */
-      m->scratch[at + 6] = count;
-      (void)send_data(m, src, 0, len);
-      count = 0;
-      len = hermc_asl_answer_begin(q->id32, 0, m->scratch + at, body_cap(m, at));
+    for (;;) {
+      if (count == 0)
+        len = hermc_asl_answer_begin(q->id32, 0, out, cap);
       n = hermc_asl_answer_entry_encode((uint32_t)i + 1u, a->name,
                                         cstr_len(a->name), a->type,
-                                        cstr_len(a->type),
-                                        m->scratch + at + len,
-                                        body_cap(m, at) - len);
+                                        cstr_len(a->type), out + len,
+                                        cap - len);
+      if (n != 0 || count == 0)
+        break;
+      out[6] = count; /* full: send what we have */
+      (void)send_data(m, src, 0, len);
+      count = 0;
     }
     if (n == 0) {
       ++m->counters.tx_dropped; /* one entry alone does not fit a packet */
@@ -285,7 +286,7 @@ static void on_query(struct hermc_module *m, uint16_t src,
     ++count;
   }
   if (count > 0) {
-    m->scratch[at + 6] = count;
+    out[6] = count;
     if (send_data(m, src, 0, len) == HERMC_OK)
       ++m->counters.queries_answered;
   }
@@ -300,46 +301,48 @@ static void on_query(struct hermc_module *m, uint16_t src,
 }
 #endif
 
+/* Serves a request: the handler's response, or one typed error (an APO we
+ * do not have, the handler's refusal, a response larger than the room). */
 static void on_request(struct hermc_module *m, uint16_t src,
                        const struct hermc_asl_msg *x) {
-  if (HERMC_MAX_APOS == 0 || x->id32 == 0 || x->id32 > m->napos) {
-    ++m->counters.rx_unknown_apo;
-    if (x->request_id != 0)
-      send_error(m, src, x->request_id, HERMC_EC_APO_GONE,
-                 "no such APO");
-    return;
-  }
+  uint8_t code = HERMC_EC_APO_GONE;
+  const char *why = "no such APO";
 #if HERMC_MAX_APOS > 0
-  size_t at = body_at(src, 0);
-  size_t resp_len = 0;
-  const struct hermc_apo *a = &m->apos[x->id32 - 1u];
-  uint8_t code;
-  ++m->counters.requests_served;
-  code = a->handler(a->ctx, x->payload.data, x->payload.size,
-                    m->scratch + at + 11u, body_cap(m, at) - 11u, &resp_len);
-  if (x->oneway) {
-    /* One-way: a reliable one is acknowledged, a plain one not at all.
-     * (No duplicate cache: a retransmitted copy reaches the handler again.) */
+  if (x->id32 != 0 && x->id32 <= m->napos) {
+    size_t at = body_at(src, 0);
+    size_t cap = body_cap(m, at) - 11u;
+    size_t resp_len = 0;
+    const struct hermc_apo *a = &m->apos[x->id32 - 1u];
+    ++m->counters.requests_served;
+    code = a->handler(a->ctx, x->payload.data, x->payload.size,
+                      m->scratch + at + 11u, cap, &resp_len);
+    if (x->oneway) {
+      /* One-way: a reliable one is acknowledged, a plain one not at all.
+       * (No duplicate cache: a retransmitted copy reaches the handler
+       * again.) */
 #if HERMC_RELIABLE
-    if (x->kind == HERMC_ASL_RELIABLE_REQUEST)
-      (void)send_data(m, src, 0,
-                      hermc_asl_ack_encode(x->request_id, m->scratch + at,
-                                           body_cap(m, at)));
+      if (x->kind == HERMC_ASL_RELIABLE_REQUEST)
+        (void)send_data(m, src, 0,
+                        hermc_asl_ack_encode(x->request_id, m->scratch + at,
+                                             body_cap(m, at)));
 #endif
-    return;
-  }
-  if (code != 0) {
-    send_error(m, src, x->request_id, code, "refused");
-    return;
-  }
-  if (resp_len > body_cap(m, at) - 11u) {
-    send_error(m, src, x->request_id, HERMC_EC_INVALID_PARAMETER,
-               "too large");
-    return;
-  }
-  (void)hermc_asl_response_ok_header(x->request_id, m->scratch + at, 11u);
-  (void)send_data(m, src, 0, 11u + resp_len);
+      return;
+    }
+    why = "refused";
+    if (code == 0) {
+      if (resp_len <= cap) {
+        (void)hermc_asl_response_ok_header(x->request_id, m->scratch + at, 11u);
+        (void)send_data(m, src, 0, 11u + resp_len);
+        return;
+      }
+      code = HERMC_EC_INVALID_PARAMETER;
+      why = "too large";
+    }
+  } else
 #endif
+    ++m->counters.rx_unknown_apo;
+  if (x->request_id != 0)
+    send_error(m, src, x->request_id, code, why);
 }
 
 #if HERMC_TOPICS

@@ -227,6 +227,7 @@ static int complete(hermc_reasm* r, hermc_reasm_slot* s,
   return HERMC_REASM_COMPLETE;
 }
 
+HERMC_NOINLINE
 static int drop(hermc_count_t* counter) {
   ++*counter;
   return HERMC_REASM_DROPPED;
@@ -410,6 +411,7 @@ void hermc_link_rx_init(hermc_link_rx* rx, bool escaped) {
   rx->flags = HERMC_ESCAPED && escaped ? RX_ESCAPED : 0u;
 }
 
+HERMC_NOINLINE
 static void rx_restart(hermc_link_rx* rx, uint8_t skipping) {
   rx->run = 0;
   rx->dec = 0;
@@ -525,6 +527,7 @@ void hermc_link_tx_init(hermc_link_tx* tx, bool escaped) {
   tx->refused = 0;
 }
 
+HERMC_NOINLINE
 static void tx_put(hermc_link_tx* tx, uint8_t b) {
   uint32_t at = (uint32_t)tx->head + tx->count;
   if (at >= HERMC_TX_RING)

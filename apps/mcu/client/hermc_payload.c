@@ -219,15 +219,25 @@ enum hermc_payload_error hermc_pr_finish(struct hermc_pr *r) {
 
 /* -- SRF04 reading --------------------------------------------------------- */
 
+/* The reading's layout is fixed: version 1, one element, the type name,
+ * then the fields; written directly, so that a board sending only readings
+ * links no payload writer. The bytes are those of the hermc_pw_* calls
+ * (payload_test checks both against the C++ encoder). */
 size_t hermc_srf04_encode(const struct hermc_srf04_reading *x, uint8_t *out,
                           size_t cap) {
-  struct hermc_pw w;
-  hermc_pw_begin(&w, out, cap, 1);
-  hermc_pw_element(&w, HERMC_SRF04_TYPE);
-  hermc_pw_u16(&w, x->seq);
-  hermc_pw_u16(&w, x->distance_mm);
-  hermc_pw_u32(&w, x->echo_us);
-  return hermc_pw_finish(&w);
+  static const char type[] = HERMC_SRF04_TYPE;
+  size_t i;
+  if (cap < HERMC_SRF04_SIZE)
+    return 0;
+  out[0] = HERMC_PAYLOAD_VERSION;
+  out[1] = 1u;
+  out[2] = (uint8_t)(sizeof type - 1u);
+  for (i = 0; i < sizeof type - 1u; ++i)
+    out[3u + i] = (uint8_t)type[i];
+  hermc_put_u16(out + 2u + sizeof type, x->seq);
+  hermc_put_u16(out + 4u + sizeof type, x->distance_mm);
+  hermc_put_u32(out + 6u + sizeof type, x->echo_us);
+  return HERMC_SRF04_SIZE;
 }
 
 enum hermc_payload_error hermc_srf04_decode(const uint8_t *p, size_t n,

@@ -101,9 +101,14 @@ struct hermc_srf04_reading {
   uint32_t echo_us;
 };
 
+/* The encoded reading's size, bytes: version, count, the type name with its
+ * length, 8 bytes of fields. */
+#define HERMC_SRF04_SIZE 37u
+
 /* One element `herm::hermd::srf04_reading` (hermd registers the type,
  * apps/hermd/testbed_types.hpp) {seq: u16, distance_mm: u16, echo_us:
- * u32}: 30 bytes. Returns the length, or 0 when cap is too small. */
+ * u32}: HERMC_SRF04_SIZE bytes. Returns the length, or 0 when cap is too
+ * small. */
 size_t hermc_srf04_encode(const struct hermc_srf04_reading *x, uint8_t *out,
                           size_t cap);
 /* Reads exactly that payload back; HERMC_PR_OK or what was wrong. */

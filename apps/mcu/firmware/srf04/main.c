@@ -1,6 +1,7 @@
 /* The sonar board's firmware: the ATmega128 with its SRF04 as a HERM module
  * of its own on RS232C (UART0, 19,200 baud), a leaf that sends every reading
- * to the sensor module's `sonar` APO (docs/mcu.md, "The SRF04 board").
+ * to the sensor module's `sonar` APO and serves the last one from an APO of
+ * its own (docs/mcu.md, "The SRF04 board").
  *
  * Every SRF04_PERIOD_MS the board measures; each reading goes as a request
  * whose payload is one element `herm::hermd::srf04_reading` (seq:u16,
@@ -9,6 +10,11 @@
  * while every pending slot is busy, is not sent and is counted
  * (readings_unsent); the sequence number still advances, so the receiver
  * sees the gap.
+ *
+ * The board's APO SRF04_APO_NAME (type SRF04_APO_TYPE) answers any request
+ * (any payload, or none) with the last reading in the same payload; before
+ * the first reading that is seq 0, distance 0, echo 0. So the main
+ * controller can also ask the sensor directly (hermctl call, herm-apo-peer).
  *
  * Module id: SRF04_MODULE_ID (static, the board never claims one).
  * Instance: a boot counter in EEPROM (bytes 0..3), so a neighbour tells a
@@ -33,7 +39,12 @@
 #ifndef SRF04_TARGET_APO
 #define SRF04_TARGET_APO "sonar"
 #endif
-#define SRF04_READING_TYPE HERMC_SRF04_TYPE
+#ifndef SRF04_APO_NAME
+#define SRF04_APO_NAME "srf04"
+#endif
+#ifndef SRF04_APO_TYPE
+#define SRF04_APO_TYPE "herm.srf04"
+#endif
 
 /* What the board counts besides hermc's and the drivers' counters (kept
  * for a debugger or a future status APO). */
@@ -46,6 +57,8 @@ struct board_counters {
 
 static struct hermc_module module;
 static struct board_counters counters;
+/* The last reading (seq 0: none yet), what the srf04 APO answers. */
+static struct hermc_srf04_reading last_reading;
 
 static uint64_t boot_instance(void) {
   uint32_t *const at = (uint32_t *)0;
@@ -70,15 +83,20 @@ static void on_response(void *ctx, enum hermc_status status,
     counters.responses_failed++;
 }
 
-static void send_reading(int sonar, uint16_t seq, const srf04_measurement_t *m) {
-  uint8_t payload[40];
-  struct hermc_pw w;
-  hermc_pw_begin(&w, payload, sizeof(payload), 1u);
-  hermc_pw_element(&w, SRF04_READING_TYPE);
-  hermc_pw_u16(&w, seq);
-  hermc_pw_u16(&w, m->distance_mm);
-  hermc_pw_u32(&w, m->echo_us);
-  size_t len = hermc_pw_finish(&w);
+/* The board's APO: any request is answered with the last reading (the
+ * request's payload is not read). */
+static uint8_t serve_reading(void *ctx, const uint8_t *req, size_t req_len,
+                             uint8_t *resp, size_t resp_cap, size_t *resp_len) {
+  (void)ctx;
+  (void)req;
+  (void)req_len;
+  *resp_len = hermc_srf04_encode(&last_reading, resp, resp_cap);
+  return 0;
+}
+
+static void send_reading(int sonar) {
+  uint8_t payload[HERMC_SRF04_SIZE];
+  size_t len = hermc_srf04_encode(&last_reading, payload, sizeof(payload));
   counters.readings++;
   if (len == 0u ||
       hermc_request(&module, sonar, payload, len, on_response, NULL, 0u) != HERMC_OK)
@@ -114,9 +132,11 @@ int main(void) {
       sleep_mode();
   }
   int sonar = hermc_remote(&module, SRF04_TARGET_APO);
+  /* The one APO of the build (HERMC_MAX_APOS=1): it cannot be refused. */
+  (void)hermc_register_apo(&module, SRF04_APO_NAME, SRF04_APO_TYPE,
+                           serve_reading, NULL);
   sei();
 
-  uint16_t seq = 0;
   uint32_t last = clock_ms();
   for (;;) {
     uint8_t byte;
@@ -127,8 +147,12 @@ int main(void) {
     if ((uint32_t)(now - last) >= SRF04_PERIOD_MS && srf04_trigger(now))
       last = now;
     srf04_measurement_t m;
-    if (srf04_poll(clock_ms(), &m) == SRF04_READY)
-      send_reading(sonar, ++seq, &m);
+    if (srf04_poll(clock_ms(), &m) == SRF04_READY) {
+      ++last_reading.seq;
+      last_reading.distance_mm = m.distance_mm;
+      last_reading.echo_us = m.echo_us;
+      send_reading(sonar);
+    }
     drain_tx();
     /* Every event comes with an interrupt (the 1 ms tick at least). */
     cli();
