@@ -16,7 +16,8 @@
  *   --send APO       sends an SRF04-style reading (`herm::hermd::srf04_reading`,
  *                    seq, distance_mm, echo_us) every period to remote APO
  *                    APO, as a request that waits for its response.
- *   --count N        stops after N publications or readings (0: never).
+ *   --count N        stops after N publications or readings sent (0: never;
+ *                    a reading waits until its APO is discovered).
  *
  * Built with HERMC_AUTH=1 (herm-mcu-board-keyed), it joins a keyed network
  * (hermd's `auth` section, docs/user-guide.md) with the same settings:
@@ -289,7 +290,7 @@ static struct hermc_module module;
 
 /* --publish: the counter as one `@i32` element (what herm-apo-peer's
  * subscriber prints). */
-static void publish_counter(int t, unsigned long n) {
+static int publish_counter(int t, unsigned long n) {
   uint8_t payload[16];
   struct hermc_pw w;
   hermc_pw_begin(&w, payload, sizeof payload, 1);
@@ -300,13 +301,14 @@ static void publish_counter(int t, unsigned long n) {
     printf("published %lu subscribers %d\n", n, sent);
   else
     printf("not published %lu: %d\n", n, sent);
+  return sent >= 0;
 }
 
-/* --send: reading n, a request that waits for its response. */
-static void send_reading(int r, unsigned long n) {
+/* --send: reading n, a request that waits for its response. 1 if sent. */
+static int send_reading(int r, unsigned long n) {
   if (!hermc_remote_ready(&module, r)) {
     printf("not ready %lu\n", n);
-    return;
+    return 0;
   }
   uint8_t payload[48];
   uint16_t mm = (uint16_t)(500 + (n * 37) % 3000);
@@ -318,6 +320,7 @@ static void send_reading(int r, unsigned long n) {
     printf("sent %lu\n", n);
   else
     printf("not sent %lu: %d\n", n, rc);
+  return rc == HERMC_OK;
 }
 
 int main(int argc, char **argv) {
@@ -462,11 +465,15 @@ int main(int argc, char **argv) {
     if ((int32_t)(now - next_period) >= 0 && (t >= 0 || r >= 0)
         && (count == 0 || done < count)) {
       next_period += (uint32_t)period_ms;
-      ++done;
+      /* A value counts once it went out: a reading waits (the next period
+       * tries the same number again) until its APO is discovered. */
+      int went = 0;
       if (t >= 0)
-        publish_counter(t, done);
+        went |= publish_counter(t, done + 1);
       if (r >= 0)
-        send_reading(r, done);
+        went |= send_reading(r, done + 1);
+      if (went)
+        ++done;
     }
     size_t k;
     while ((k = hermc_poll_tx(&module, out, sizeof out)) > 0) {

@@ -47,6 +47,15 @@
 #include "apps/mcu/sim/stack_report.hpp"
 #include "apps/mcu/sim/uart_bridge.hpp"
 
+// LeakSanitizer (the AddressSanitizer suite): simavr 1.6's
+// elf_read_firmware mallocs the firmware's flash, EEPROM and symbol images
+// and sim_elf.h has no function that frees them (avr_load_firmware copies
+// what it needs); one set per run. LeakSanitizer asks this hook for its
+// suppressions; nothing of HERM's own is suppressed.
+extern "C" const char* __lsan_default_suppressions() {
+  return "leak:elf_read_firmware\n";
+}
+
 namespace {
 
 volatile sig_atomic_t stop_signal = 0;
