@@ -2,9 +2,10 @@
 // simavr (herm-avr-sim) against real hermd processes, over a paced
 // pseudo-terminal cable at 19,200 baud: the paper's AVR board as a module
 // of its own. The scripted obstacle's distances reach the collector on the
-// main controller through the sensor module's sonar APO; a board run again
-// from its EEPROM (herm-avr-sim --eeprom) is a new instance to its
-// neighbour. Skips, saying why, when avr-gcc or libsimavr was not found at
+// main controller through the sensor module's sonar APO; a module beyond the
+// main controller finds the board's own APO `srf04` by name and asks it for
+// the last reading; a board run again from its EEPROM (herm-avr-sim
+// --eeprom) is a new instance to its neighbour. Skips, saying why, when avr-gcc or libsimavr was not found at
 // configure time. Every wait is bounded; nothing asserts on timing.
 #include <gtest/gtest.h>
 
@@ -15,6 +16,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <iterator>
 #include <memory>
 #include <regex>
@@ -22,6 +24,14 @@
 #include <string>
 #include <vector>
 
+#include "caf/actor_system.hpp"
+#include "caf/actor_system_config.hpp"
+#include "caf/scoped_actor.hpp"
+
+#include "actors/module.hpp"
+#include "actors/runtime/error.hpp"
+#include "actors/runtime/system.hpp"
+#include "apps/hermd/testbed_types.hpp"
 #include "apps/mcu/sim/distance_script.hpp"
 #include "channels/testing/loopback.hpp"
 #include "channels/testing/null_modem.hpp"
@@ -84,6 +94,7 @@ protected:
     cable_ = herm::test::null_modem::open(c, err);
     ASSERT_TRUE(cable_) << err;
     main_udp_ = free_udp_port();
+    main_udp2_ = free_udp_port();
     sensor_udp_ = free_udp_port();
   }
 
@@ -120,16 +131,23 @@ protected:
       << sensor_->output();
   }
 
-  /// The main controller (0x4E) with the collector, on UDP.
-  void start_main() {
+  /// The main controller (0x4E) with the collector, on UDP to the sensor
+  /// module; when `extra_peer` is not 0, a second UDP channel (eth1, a link
+  /// of its own, so floods are relayed between the two) to a module in
+  /// this process at that port.
+  void start_main(uint16_t extra_peer = 0) {
     auto cfg = dir_.path() + "/main.yaml";
-    std::ofstream{cfg}
-      << "module:\n  name: main\n  id: 0x4E\n  hello_interval_ms: 300\n"
+    std::ofstream out{cfg};
+    out << "module:\n  name: main\n  id: 0x4E\n  hello_interval_ms: 300\n"
          "control:\n  socket: " << sock("main") << "\n"
          "channels:\n"
          "  - name: eth0\n    kind: udp\n    interface: 127.0.0.1:" << main_udp_
-      << "\n    peers: 127.0.0.1:" << sensor_udp_ << "\n"
-         "apos:\n  - name: collector\n    kind: collector\n";
+      << "\n    peers: 127.0.0.1:" << sensor_udp_ << "\n";
+    if (extra_peer != 0)
+      out << "  - name: eth1\n    kind: udp\n    interface: 127.0.0.1:"
+          << main_udp2_ << "\n    peers: 127.0.0.1:" << extra_peer << "\n";
+    out << "apos:\n  - name: collector\n    kind: collector\n";
+    out.close();
     main_ = std::make_unique<child_process>(std::vector<std::string>{HERMD_BIN, cfg});
     ASSERT_TRUE(main_->started());
     ASSERT_TRUE(main_->wait_for_line_containing("running as 0x4E", 20s))
@@ -179,6 +197,7 @@ protected:
   herm::test::temp_dir dir_{"herm-avr-hermd"};
   std::unique_ptr<herm::test::null_modem> cable_;
   uint16_t main_udp_ = 0;
+  uint16_t main_udp2_ = 0;
   uint16_t sensor_udp_ = 0;
   std::unique_ptr<child_process> main_;
   std::unique_ptr<child_process> sensor_;
@@ -251,6 +270,91 @@ TEST_F(avr_hermd, readings_with_the_scripted_distances_reach_the_collector) {
     << sim_->output();
   EXPECT_NE(sim_->output().find("dropped_to_host=0"), std::string::npos)
     << sim_->output();
+}
+
+// The board's own APO: `srf04` (type herm.srf04) answers any request with
+// its last reading. A C++ module in this process (0x31), whose only link is
+// a UDP channel of its own to the main controller, binds it by name (a discovery flooded through
+// the main controller and the sensor module over RS232C, answered by the
+// firmware, answered back the same way) and asks it: the reading's distance is the scripted obstacle's
+// and its echo time the SRF04 part's pulse for it. Its application table
+// then lists the board's APO as hermctl's `apps` shows it.
+TEST_F(avr_hermd, the_boards_own_apo_answers_a_far_module_with_its_last_reading) {
+  SKIP_WITHOUT_AVR();
+  const uint16_t asker_udp = herm::test::free_udp_port();
+  ASSERT_NO_FATAL_FAILURE(start_main(asker_udp));
+  ASSERT_NO_FATAL_FAILURE(start_sensor());
+  auto script_path = dir_.path() + "/distance.txt";
+  std::ofstream{script_path} << "0 1234\n";
+  ASSERT_NO_FATAL_FAILURE(
+    start_board({"--script", script_path, "--max-seconds", "60", "--report-stack"}));
+
+  caf::actor_system_config cfg;
+  herm::configure(cfg);
+  cfg.add_message_types<caf::id_block::herm_apos>();
+  caf::actor_system sys{cfg};
+  herm::module_config mc;
+  mc.routing.id = 0x31;
+  mc.routing.hello_interval = 300ms;
+  mc.devices.push_back(herm::device_config{
+    "udp0", "udp", "127.0.0.1:" + std::to_string(asker_udp),
+    {{"peers", "127.0.0.1:" + std::to_string(main_udp2_)}}});
+  auto m = herm::run_module(sys, mc);
+  ASSERT_TRUE(m) << herm::render(m.error());
+  caf::scoped_actor self{sys};
+
+  // Bound once the routes over RS232C have formed (not_found or no_route
+  // until then).
+  caf::actor proxy;
+  std::string last_error;
+  for (auto deadline = std::chrono::steady_clock::now() + 40s;
+       !proxy && std::chrono::steady_clock::now() < deadline;) {
+    lines_with(*sensor_, "\x01", 100ms); // keep hermd's debug log drained
+    self->request((*m)->apps, 5s, herm::atom::bind_v,
+                  herm::bind_request{herm::query_by::name, "srf04", 1000})
+      .receive([&](caf::actor& p) { proxy = p; },
+               [&](caf::error& e) { last_error = herm::render(e); });
+  }
+  ASSERT_TRUE(proxy) << "srf04 never bound: " << last_error << "\n"
+                     << sensor_->output();
+
+  // Any request is answered with the last reading; seq 0 means none taken
+  // yet (asked right after boot), so ask until one is there.
+  herm::hermd::srf04_reading reading{};
+  for (auto deadline = std::chrono::steady_clock::now() + 20s;
+       reading.seq == 0 && std::chrono::steady_clock::now() < deadline;) {
+    self->request(proxy, 5s, std::string{"reading?"})
+      .receive([&](herm::hermd::srf04_reading& r) { reading = r; },
+               [&](caf::error& e) { last_error = herm::render(e); });
+    if (reading.seq == 0)
+      lines_with(*sensor_, "\x01", 200ms);
+  }
+  ASSERT_GT(reading.seq, 0u) << "no reading from srf04: " << last_error;
+  EXPECT_NEAR(reading.distance_mm, 1234, 1);
+  EXPECT_NEAR(static_cast<double>(reading.echo_us),
+              herm::avr_sim::echo_width_us(1234), 2);
+
+  std::vector<herm::apo_info> apps;
+  self->request((*m)->apps, 5s, herm::atom::get_v, herm::atom::apps_v)
+    .receive([&](std::vector<herm::apo_info>& rows) { apps = rows; },
+             [&](caf::error& e) { FAIL() << herm::render(e); });
+  bool listed = false;
+  for (auto& a : apps)
+    listed = listed
+             || (a.ref.name == "srf04" && a.ref.type == "herm.srf04"
+                 && a.ref.module == 0x0A04 && !a.local);
+  EXPECT_TRUE(listed) << "the board's APO is not in the application table";
+  m->stop();
+
+  // Serving its APO as well as sending readings, the board's stack stays
+  // within issue 17's bound (painted stack, herm-avr-sim --report-stack).
+  sim_->terminate();
+  EXPECT_EQ(sim_->wait(20s), 0) << sim_->output();
+  std::smatch used;
+  auto out = sim_->output();
+  ASSERT_TRUE(std::regex_search(out, used, std::regex{R"(stack used=(\d+))"})) << out;
+  EXPECT_LT(std::stol(used[1]), 512) << out;
+  std::cout << "board stack high-water mark serving srf04: " << used[1] << " B\n";
 }
 
 // The firmware counts its boots in EEPROM and makes its instance of the
