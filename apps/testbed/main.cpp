@@ -615,7 +615,7 @@ apos:
                             : "topology.dot has no edge " + edge);
   }
   tb.say("the sensor module's neighbours (the board among them) and APOs "
-         "(the board serves none: it is a client of `sonar`)");
+         "(`sonar` takes the board's readings)");
   ctl("sensor", {"neighbours"});
   ctl("sensor", {"apps"});
 
