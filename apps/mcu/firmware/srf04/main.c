@@ -84,7 +84,9 @@ static void on_response(void *ctx, enum hermc_status status,
 }
 
 /* The board's APO: any request is answered with the last reading (the
- * request's payload is not read). */
+ * request's payload is not read). resp_cap is HERMC_MAX_PACKET less the
+ * data and response headers (19 B), at least 45 B as hermc_config.h
+ * requires 64: the reading's HERMC_SRF04_SIZE (37) always fits. */
 static uint8_t serve_reading(void *ctx, const uint8_t *req, size_t req_len,
                              uint8_t *resp, size_t resp_cap, size_t *resp_len) {
   (void)ctx;
