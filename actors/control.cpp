@@ -290,6 +290,29 @@ void reply_rows(control_impl self, const Handle& dest, Atom what, ms timeout,
       fail_with(rp));
 }
 
+/// The application table: local APOs and those discovered so far; with
+/// "all": true it first asks the whole network (a flooded query for every
+/// APO, answers collected for discovery_ms), so every APO the network
+/// knows is in the rows, with its module and type.
+void cmd_apps(control_impl self, const json& req, ms timeout,
+              reply_promise rp) {
+  auto ai = req.find("all");
+  if (ai == req.end() || !ai->is_boolean() || !ai->get<bool>()) {
+    reply_rows<apo_info>(self, self->state.m.apps, atom::apps_v, timeout, rp);
+    return;
+  }
+  apo_query q{query_by::any, std::string{}, discovery_ms, false};
+  self
+    ->request(self->state.m.apps, timeout + ms(discovery_ms), atom::find_v,
+              std::move(q))
+    .then(
+      [self, timeout, rp](std::vector<apo_ref>&) mutable {
+        reply_rows<apo_info>(self, self->state.m.apps, atom::apps_v, timeout,
+                             rp);
+      },
+      fail_with(rp));
+}
+
 void cmd_stats(control_impl self, ms timeout, reply_promise rp) {
   auto& st = self->state;
   self->request(st.m.agent, timeout, atom::get_v, atom::stats_v)
@@ -558,7 +581,7 @@ void dispatch(control_impl self, const std::string& text, reply_promise rp) {
     reply_rows<neighbour_info>(self, self->state.m.agent, atom::neighbors_v,
                                timeout, rp);
   else if (cmd == "apps")
-    reply_rows<apo_info>(self, self->state.m.apps, atom::apps_v, timeout, rp);
+    cmd_apps(self, req, timeout, rp);
   else if (cmd == "stats")
     cmd_stats(self, timeout, rp);
   else if (cmd == "echo")

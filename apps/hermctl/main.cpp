@@ -466,6 +466,8 @@ int main(int argc, char** argv) {
   neighbors->alias("neighbours");
   auto* apps = app.add_subcommand("apps", "application objects, local and "
                                           "discovered");
+  apps->add_flag("--all", o.all,
+                 "ask the whole network first: every APO with its module");
   auto* stats = app.add_subcommand("stats", "every counter");
   auto* ping = app.add_subcommand("ping", "round-trip times to a module's "
                                           "control service");
@@ -527,7 +529,7 @@ int main(int argc, char** argv) {
     if (neighbors->parsed())
       return show(c, o, module, {{"cmd", "neighbors"}}, show_neighbors);
     if (apps->parsed())
-      return show(c, o, module, {{"cmd", "apps"}}, show_apps);
+      return show(c, o, module, {{"cmd", "apps"}, {"all", o.all}}, show_apps);
     if (stats->parsed())
       return show(c, o, module, {{"cmd", "stats"}}, show_stats);
     if (ping->parsed())

@@ -526,7 +526,8 @@ apos:
             : std::vector<std::string>{bin_dir + "/herm-mcu-board", "--device",
                                        board_cable->path_a(), "--baud", "19200",
                                        "--send", "sonar", "--period-ms",
-                                       std::to_string(sonar_period)};
+                                       std::to_string(sonar_period), "--echo",
+                                       "srf04"};
 
   testbed tb{bin_dir, quiet};
   auto hermd = tb.bin("hermd");
@@ -618,6 +619,19 @@ apos:
          "(`sonar` takes the board's readings)");
   ctl("sensor", {"neighbours"});
   ctl("sensor", {"apps"});
+  tb.say("every APO the network knows, as the main controller finds them "
+         "(the board's own `srf04` among them)");
+  {
+    auto [apps_status, apps_out] = ctl("main", {"apps", "--all"});
+    std::istringstream rows{apps_out};
+    std::string row, found;
+    while (std::getline(rows, row))
+      if (has(row, board_id) && has(row, "srf04") && has(row, "remote"))
+        found = row;
+    tb.event(apps_status == 0 && !found.empty(), "avr_board_apo_in_apps",
+             !found.empty() ? "hermctl apps --all on the main controller: " + found
+                            : "no APO srf04 on " + board_id + " in hermctl apps --all");
+  }
 
   // -- 2. steady state ------------------------------------------------------------------
   tb.say("steady state: sonar batches over RS232C, vision data through mobile");

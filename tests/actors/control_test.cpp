@@ -31,6 +31,7 @@
 
 #include "caf/actor_system.hpp"
 #include "caf/actor_system_config.hpp"
+#include "caf/event_based_actor.hpp"
 #include "caf/scoped_actor.hpp"
 #include "caf/send.hpp"
 #include "caf/typed_event_based_actor.hpp"
@@ -415,6 +416,35 @@ TEST_F(control_test, neighbors_apps_stats_and_echo_have_their_shapes) {
   EXPECT_EQ(echo["module"], "0x30");
   EXPECT_EQ(echo["id"], 0x30);
   EXPECT_EQ(echo["name"], "alpha");
+}
+
+// apps lists what this module knows; apps with "all" asks the network
+// first, so a remote APO never looked up before is listed with its module.
+TEST_F(control_test, apps_all_asks_the_network_for_every_apo) {
+  converge();
+  // An APO on charlie (two hops away) that nobody has looked up.
+  auto apo = sys->spawn([]() -> caf::behavior {
+    return {[](int32_t x) { return x; }};
+  });
+  caf::scoped_actor self{*sys};
+  self->request(charlie->apps, 5s, atom::add_v, std::string{"lidar"},
+                std::string{"scan"}, caf::actor_cast<caf::actor>(apo))
+    .receive([](apo_ref&) {},
+             [](caf::error& err) { FAIL() << render(err); });
+  auto lidar = [](const json& rows) {
+    for (auto& a : rows)
+      if (a["module"] == "0x32" && a["name"] == "lidar" && a["type"] == "scan"
+          && a["local"] == false)
+        return true;
+    return false;
+  };
+  auto before = result({{"cmd", "apps"}});
+  EXPECT_FALSE(lidar(before)) << before.dump();
+  auto all = result({{"cmd", "apps"}, {"all", true}});
+  EXPECT_TRUE(lidar(all)) << all.dump();
+  // A non-boolean "all" is the plain table.
+  EXPECT_TRUE(result({{"cmd", "apps"}, {"all", "yes"}}).is_array());
+  caf::anon_send_exit(apo, caf::exit_reason::user_shutdown);
 }
 
 TEST_F(control_test, the_service_answers_actors_directly_too) {

@@ -36,7 +36,7 @@ std::string run_every_event(const std::vector<std::string>& args) {
   auto out = tb.output();
   for (auto name :
        {"routes_converged", "avr_board_is_a_module", "topology_written",
-        "avr_board_in_topology", "sonar_batch_received",
+        "avr_board_in_topology", "avr_board_apo_in_apps", "sonar_batch_received",
         "avr_readings_reach_collector", "first_sonar_batch_not_lost",
         "sonar_batch_fragmented_on_rs232c", "vision_routed_through_mobile",
         "vision_frame_received", "avr_board_reboots_as_a_new_instance",
