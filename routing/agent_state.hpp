@@ -89,8 +89,9 @@ struct agent_state {
   /// hold_factor. A neighbour with slower hellos than ours refreshes its
   /// routes less often; held for our own period only, its routes would
   /// expire between two of its updates (Babel holds a route 3.5 times the
-  /// interval its sender announced, RFC 8966 3.5.3). The neighbour table
-  /// bounds the interval a hello may say.
+  /// interval its sender announced, RFC 8966 3.5.3). A hello says its
+  /// interval in 16 bits (at most 65.5 s), which bounds the hold; a
+  /// neighbour that falls silent loses its routes with it anyway.
   std::chrono::steady_clock::duration
   hold(std::chrono::milliseconds neighbour_interval = {}) const {
     auto interval = std::max(cfg.hello_interval, neighbour_interval);
