@@ -66,6 +66,16 @@ if(herm_warning_flags)
                INTERFACE_COMPILE_OPTIONS "$<BUILD_INTERFACE:${herm_warning_flags}>")
 endif()
 
+# A robot needs no debug info: `cmake --install` strips as `--strip` does
+# (below: programs stripped, static libraries without their debug info),
+# unless configured with -DHERM_INSTALL_STRIP=OFF. The .deb strips its files
+# too (CPACK_STRIP_FILES). Every install rule of HERM is in this file,
+# after this one.
+option(HERM_INSTALL_STRIP "cmake --install strips programs and the debug info of libraries" ON)
+if(HERM_INSTALL_STRIP)
+  install(CODE "set(CMAKE_INSTALL_DO_STRIP TRUE)")
+endif()
+
 install(TARGETS ${herm_libraries} herm herm_warnings
   EXPORT hermTargets
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}

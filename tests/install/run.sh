@@ -63,6 +63,16 @@ if [ -e "$prefix/bin/hermd" ]; then
     fail=1
   fi
 fi
+# Stripped by default (HERM_INSTALL_STRIP): programs without a symbol table
+# or DWARF, static libraries without DWARF (their symbols stay for linking).
+for tool in hermd hermctl; do
+  if [ -e "$prefix/bin/$tool" ] && readelf -S "$prefix/bin/$tool" | grep -Eq '\.(symtab|debug_info)'; then
+    echo "  bin/$tool is installed with symbols or debug info (not stripped)"; fail=1
+  fi
+done
+if readelf -S "$prefix/lib/libherm_runtime.a" | grep -q '\.debug_info'; then
+  echo "  lib/libherm_runtime.a is installed with debug info"; fail=1
+fi
 if grep -rq -- "-Wshadow" "$prefix/lib/cmake/herm"; then
   echo "  HERM's warning flags leak into the package"; fail=1
 fi
