@@ -74,14 +74,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   uint8_t tag = (settings & 1) != 0 ? 16 : 8;
   auto link = static_cast<uint8_t>(settings >> 1 & 0x07);
   size_t mutations = in.u8() % 8;
-  struct mutation {
-    uint16_t pos;
-    uint8_t kind;
-    uint8_t value;
-  };
-  mutation ms[8];
+  fuzz::mutation ms[8];
   for (size_t i = 0; i < mutations; ++i)
-    ms[i] = mutation{in.u16(), in.u8(), in.u8()};
+    ms[i] = fuzz::mutation::read(in);
   size_t n = in.size;
   auto* body = in.take(n);
   // The raw input is not signed with a key that never signs anything.
@@ -140,25 +135,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     HERM_FUZZ_CHECK(total(rx.stats()) == 2);
   }
   auto copy = pkt;
-  for (size_t i = 0; i < mutations; ++i) {
-    auto& m = ms[i];
-    switch (m.kind % 4) {
-      case 0: // flip bits
-        if (!copy.empty())
-          copy[m.pos % copy.size()] ^= static_cast<uint8_t>(m.value | 1);
-        break;
-      case 1: // set a byte
-        if (!copy.empty())
-          copy[m.pos % copy.size()] = m.value;
-        break;
-      case 2: // cut short
-        copy.resize(copy.size() - std::min<size_t>(copy.size(), m.value % 32 + 1));
-        break;
-      case 3: // append
-        copy.insert(copy.end(), m.value % 32 + 1, m.value);
-        break;
-    }
-  }
+  for (size_t i = 0; i < mutations; ++i)
+    ms[i].apply(copy);
   authenticator rx{config(tag), 3};
   auth_trailer t;
   auto res = rx.verify(copy.data(), copy.size(), link, t0, t, 0);

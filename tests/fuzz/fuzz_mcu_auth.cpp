@@ -72,14 +72,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto link = static_cast<uint8_t>(settings >> 1 & 0x07);
   bool all = (settings & 0x10) != 0;
   size_t mutations = in.u8() % 8;
-  struct mutation {
-    uint16_t pos;
-    uint8_t kind;
-    uint8_t value;
-  };
-  mutation ms[8];
+  fuzz::mutation ms[8];
   for (size_t i = 0; i < mutations; ++i)
-    ms[i] = mutation{in.u16(), in.u8(), in.u8()};
+    ms[i] = fuzz::mutation::read(in);
   size_t n = in.size;
   auto* body = in.take(n);
   // The raw input through the whole receive path, twice (state may change).
@@ -138,25 +133,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                     && t.body_size == ct.body_len);
   }
   auto copy = pkt;
-  for (size_t i = 0; i < mutations; ++i) {
-    auto& m = ms[i];
-    switch (m.kind % 4) {
-      case 0: // flip bits
-        if (!copy.empty())
-          copy[m.pos % copy.size()] ^= static_cast<uint8_t>(m.value | 1);
-        break;
-      case 1: // set a byte
-        if (!copy.empty())
-          copy[m.pos % copy.size()] = m.value;
-        break;
-      case 2: // cut short
-        copy.resize(copy.size() - std::min<size_t>(copy.size(), m.value % 32 + 1));
-        break;
-      case 3: // append
-        copy.insert(copy.end(), m.value % 32 + 1, m.value);
-        break;
-    }
-  }
+  for (size_t i = 0; i < mutations; ++i)
+    ms[i].apply(copy);
   hermc_auth rx;
   c_init(rx, tag, 4);
   authenticator cpp{cpp_config(tag), 5};
