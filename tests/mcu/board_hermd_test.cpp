@@ -20,8 +20,7 @@
 #include <string>
 
 #include "channels/testing/loopback.hpp"
-#include "channels/testing/null_modem.hpp"
-#include "tests/support/process.hpp"
+#include "tests/mcu/board_fixture.hpp"
 
 using namespace herm::test;
 using namespace std::chrono_literals;
@@ -29,72 +28,32 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string hermd = HERMD_BIN;
-const std::string hermctl = HERMCTL_BIN;
 const std::string apo_peer = HERM_APO_PEER_BIN;
 const std::string board_bin = HERM_MCU_BOARD_BIN;
 
-/// The board's module id (herm-mcu-board's default) as hermd prints it.
-const std::string board_id = "0xA04";
-
-class board_hermd : public ::testing::Test {
+class board_hermd : public board_network {
 protected:
   void SetUp() override {
-    char tmpl[] = "/tmp/herm-board-XXXXXX";
-    dir_ = ::mkdtemp(tmpl);
+    board_network::SetUp();
     udp_ = free_udp_port();
     peer_udp_ = free_udp_port();
   }
 
   void TearDown() override {
     peer_.reset();
-    board_.reset();
-    sensor_.reset();
-    cable_.reset();
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
+    board_network::TearDown();
   }
 
-  /// The cable: 19,200 baud, 10 bits per byte, `faults` on every byte.
-  void plug(herm::test::line_faults faults = {}) {
-    herm::test::null_modem::config c;
-    c.baud = 19200;
-    c.faults = faults;
-    c.seed = 17;
-    std::string err;
-    cable_ = herm::test::null_modem::open(c, err);
-    ASSERT_TRUE(cable_) << err;
-  }
-
-  /// hermd as the paper's sensor module (0x40): the board's line, UDP to
-  /// the far module, the sonar APO without a local line (readings come
-  /// from the board) and a collector.
+  /// The sensor module, with a UDP channel to the far module.
   void start_sensor() {
-    auto cfg = dir_ + "/sensor.yaml";
-    std::ofstream{cfg}
-      << "module:\n  name: sensor\n  id: 0x40\n  hello_interval_ms: 500\n"
-         "control:\n  socket: " << sock() << "\n"
-         "channels:\n"
-         "  - name: rs1\n    kind: serial\n    interface: " << cable_->path_a()
-      << "\n    baud: 19200\n"
-         "  - name: eth0\n    kind: udp\n    interface: 127.0.0.1:" << udp_
-      << "\n    peers: 127.0.0.1:" << peer_udp_ << "\n"
-         "apos:\n"
-         "  - name: sonar\n    kind: srf04_batcher\n"
-         "    options: { batch: 3, target: collector }\n"
-         "  - name: collector\n    kind: collector\n";
-    sensor_ = std::make_unique<child_process>(
-      std::vector<std::string>{hermd, cfg});
-    ASSERT_TRUE(sensor_->started());
+    board_network::start_sensor(
+      "", "  - name: eth0\n    kind: udp\n    interface: 127.0.0.1:"
+            + std::to_string(udp_) + "\n    peers: 127.0.0.1:"
+            + std::to_string(peer_udp_) + "\n");
   }
 
   void start_board(std::vector<std::string> args) {
-    std::vector<std::string> argv{board_bin, "--device", cable_->path_b(),
-                                  "--baud", "19200"};
-    argv.insert(argv.end(), args.begin(), args.end());
-    board_ = std::make_unique<child_process>(argv);
-    ASSERT_TRUE(board_->started());
-    ASSERT_TRUE(board_->wait_for_line("ready", 5s)) << board_->output();
+    board_network::start_board(board_bin, std::move(args));
   }
 
   /// herm-apo-peer as module 0x31 behind the sensor module, on UDP.
@@ -109,18 +68,6 @@ protected:
                                   "30"};
     argv.insert(argv.end(), args.begin(), args.end());
     return std::make_unique<child_process>(argv);
-  }
-
-  std::string sock() const {
-    return dir_ + "/sensor.sock";
-  }
-
-  /// hermctl's output (stdout and stderr) for `args` on the sensor module.
-  std::string ctl(const std::string& args) {
-    child_process p{{"/bin/sh", "-c",
-                     hermctl + " -s " + sock() + " " + args + " 2>&1"}};
-    p.wait(20s);
-    return p.output();
   }
 
   /// The board's instance as its neighbour, the sensor module, holds it
@@ -152,20 +99,8 @@ protected:
     return p.output();
   }
 
-  /// A number the board printed in its "counters" line.
-  static uint64_t board_counter(const std::string& out, const std::string& k) {
-    std::smatch m;
-    if (std::regex_search(out, m, std::regex{" " + k + " ([0-9]+)"}))
-      return std::stoull(m[1]);
-    return 0;
-  }
-
-  std::string dir_;
   uint16_t udp_ = 0;
   uint16_t peer_udp_ = 0;
-  std::unique_ptr<herm::test::null_modem> cable_;
-  std::unique_ptr<child_process> sensor_;
-  std::unique_ptr<child_process> board_;
   std::unique_ptr<child_process> peer_;
 };
 
