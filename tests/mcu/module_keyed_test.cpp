@@ -15,6 +15,7 @@
 
 #include "apps/mcu/client/hermc.h"
 #include "tests/mcu/mcu_bytes.hpp"
+#include "tests/mcu/mcu_packets.hpp"
 
 using namespace mcu_test;
 
@@ -150,36 +151,6 @@ protected:
     deliver(sign(hello(peer_id, 0xAB, 1000)));
     converse();
     ASSERT_EQ(m.neighbour, peer_id);
-  }
-
-  static bytes data(uint16_t src, uint16_t dst, const bytes& asl,
-                    uint32_t flood_id = 0) {
-    hermc_data_header h{src, dst, 32, 1, 2, 1, flood_id, 0};
-    uint8_t hdr[12];
-    auto n = hermc_data_header_encode(&h, hdr, sizeof hdr);
-    bytes out(hdr, hdr + n);
-    out.insert(out.end(), asl.begin(), asl.end());
-    return out;
-  }
-
-  static bytes hello(uint16_t sender, uint64_t instance, uint16_t interval) {
-    hermc_hello h{sender, instance, 1, interval};
-    uint8_t out[15];
-    return take(out, hermc_hello_encode(&h, out, sizeof out));
-  }
-
-  static bytes query(uint32_t qid, const std::string& name) {
-    uint8_t out[64];
-    return take(out, hermc_asl_query_encode(qid, HERMC_BY_NAME, name.data(),
-                                            name.size(), out, sizeof out));
-  }
-
-  static bytes request(uint64_t rid, uint32_t apo, const bytes& payload) {
-    uint8_t out[64];
-    auto n = hermc_asl_request_header(rid, apo, 0, 0, out, sizeof out);
-    bytes b = take(out, n);
-    b.insert(b.end(), payload.begin(), payload.end());
-    return b;
   }
 
   hermc_module m{};
@@ -335,10 +306,10 @@ TEST_F(hermc_module_keyed_test, a_replayed_packet_is_refused) {
 
 TEST_F(hermc_module_keyed_test, discovery_must_be_signed_and_is_answered_signed) {
   start();
-  deliver(data(peer_id, 0xFFFF, query(9, "sonar"), 77));
+  deliver(data(peer_id, 0xFFFF, query(9, HERMC_BY_NAME, "sonar"), 77));
   EXPECT_TRUE(drain().empty());
   EXPECT_EQ(m.auth.counters.rx_unsigned, 1u);
-  deliver(sign(data(peer_id, 0xFFFF, query(9, "sonar"), 78)));
+  deliver(sign(data(peer_id, 0xFFFF, query(9, HERMC_BY_NAME, "sonar"), 78)));
   auto accepted = converse();
   ASSERT_EQ(accepted.size(), 1u); // the answer, verified by the neighbour
   hermc_data_header h{};
