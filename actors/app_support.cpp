@@ -76,10 +76,11 @@ using asl_impl = app_support_actor::stateful_pointer<asl_state>;
 
 // -- small helpers -----------------------------------------------------------------
 
-/// Puts `msg` for `dst` straight on the next hop's channel when the
-/// routing agent published one (routing/fast_routes.hpp): header and
-/// message encoded into one buffer. False: it must go through the agent.
-bool send_fast(asl_impl self, module_id dst, const asl_message& msg,
+/// Puts the encoded message `body` for `dst` straight on the next hop's
+/// channel when the routing agent published one (routing/fast_routes.hpp):
+/// header and body in one buffer, allocated once. False: it must go
+/// through the agent.
+bool send_fast(asl_impl self, module_id dst, const byte_buffer& body,
                bool sign) {
   auto& cell = self->state.cfg.fast_routes;
   if (!cell || sign || !is_unicast(dst))
@@ -87,11 +88,6 @@ bool send_fast(asl_impl self, module_id dst, const asl_message& msg,
   auto snap = cell->get();
   if (!snap || dst == snap->self)
     return false;
-  // Encoded into the scratch buffer first: the packet's one allocation
-  // then has its final size.
-  auto& body = self->state.buf;
-  body.clear();
-  encode(msg, body);
   data_header h;
   h.src = snap->self;
   h.dst = dst;
@@ -111,13 +107,15 @@ bool send_fast(asl_impl self, module_id dst, const asl_message& msg,
   return true;
 }
 
+/// Encodes `msg` once, into the scratch buffer, and sends it by the
+/// published next hop or through the agent.
 void send_now(asl_impl self, module_id dst, const asl_message& msg,
               bool sign) {
   auto& st = self->state;
-  if (send_fast(self, dst, msg, sign))
-    return;
   st.buf.clear();
   encode(msg, st.buf);
+  if (send_fast(self, dst, st.buf, sign))
+    return;
   self->send(st.agent,
              send_packet{dst, asl_protocol, prio_normal, st.buf, sign});
 }
