@@ -400,8 +400,16 @@ caf::error station::attach(event_loop& loop, size_t max_datagram) {
                 std::string{"cannot receive on "} + spec_.texts.socket_noun
                   + " " + sock_path_ + ": " + render(err));
   receiving_ = true;
-  if (!watch_files(loop))
+  if (watch_files(loop)) {
+    // A file removed between open and now raised no event: look once.
+    if (auto err = check_files())
+      loop.post([this, stop, err]() mutable {
+        if (!stop->load())
+          report_failure(std::move(err));
+      });
+  } else {
     arm_liveness_timer();
+  }
   bool pending = false;
   {
     std::lock_guard<std::mutex> guard{failure_mtx_};
