@@ -89,12 +89,15 @@ struct agent_state {
   /// hold_factor. A neighbour with slower hellos than ours refreshes its
   /// routes less often; held for our own period only, its routes would
   /// expire between two of its updates (Babel holds a route 3.5 times the
-  /// interval its sender announced, RFC 8966 3.5.3). A hello says its
-  /// interval in 16 bits (at most 65.5 s), which bounds the hold; a
-  /// neighbour that falls silent loses its routes with it anyway.
+  /// interval its sender announced, RFC 8966 3.5.3). The neighbour's
+  /// interval counts up to max_interval_factor times ours: a neighbour
+  /// saying a huge one (16 bits: 65.5 s) must not keep routes it stopped
+  /// advertising, and the route table's feasibility sources, for minutes.
+  static constexpr int max_interval_factor = 16;
   std::chrono::steady_clock::duration
   hold(std::chrono::milliseconds neighbour_interval = {}) const {
-    auto interval = std::max(cfg.hello_interval, neighbour_interval);
+    auto interval = std::clamp(neighbour_interval, cfg.hello_interval,
+                               cfg.hello_interval * max_interval_factor);
     return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       interval * cfg.update_every * cfg.hold_factor);
   }
