@@ -63,6 +63,7 @@ if [ -e "$prefix/bin/hermd" ]; then
     fail=1
   fi
 fi
+command -v readelf > /dev/null || { echo "FAIL: readelf (binutils) is needed to check stripping"; exit 1; }
 # Stripped by default (HERM_INSTALL_STRIP): programs without a symbol table
 # or DWARF, static libraries without DWARF (their symbols stay for linking).
 for tool in hermd hermctl; do

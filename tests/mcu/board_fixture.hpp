@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <stdlib.h>
 
 #include <filesystem>
@@ -98,7 +100,18 @@ protected:
     return p.output();
   }
 
-  /// A number the board printed on its "counters" or "auth" line.
+  /// The counters of the sensor module's channel on device `device`
+  /// (`hermctl channels --json`), or null.
+  nlohmann::json channel_stats(const std::string& device) {
+    auto rows = nlohmann::json::parse(ctl("channels --json"), nullptr, false);
+    if (rows.is_array())
+      for (auto& c : rows)
+        if (c.value("device", std::string{}) == device && c.contains("stats"))
+          return c["stats"];
+    return nullptr;
+  }
+
+  /// A number the board printed on its "counters", "link" or "auth" line.
   static uint64_t board_counter(const std::string& out, const std::string& k) {
     std::smatch m;
     if (std::regex_search(out, m, std::regex{" " + k + " ([0-9]+)"}))

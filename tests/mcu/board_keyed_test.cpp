@@ -70,8 +70,6 @@ protected:
   /// null.
   nlohmann::json routing_stats() {
     auto j = nlohmann::json::parse(ctl("stats --json"), nullptr, false);
-    if (j.is_object() && j.contains("result"))
-      j = j["result"];
     return j.is_object() ? j.value("routing", nlohmann::json{}) : nlohmann::json{};
   }
 

@@ -294,7 +294,8 @@ int hermc_request(struct hermc_module *m, int r, const uint8_t *payload,
 
 #if HERMC_TOPICS
 /** Declares a topic this module publishes (`name` outlives the module);
- *  advertised at start (or now, if started). Returns its handle (0..) or
+ *  advertised when a neighbour is met (at once if one is known already).
+ *  Returns its handle (0..) or
  *  HERMC_ERR_NO_ROOM past HERMC_MAX_TOPICS. */
 int hermc_topic(struct hermc_module *m, const char *name);
 

@@ -16,8 +16,10 @@
  *   --send APO       sends an SRF04-style reading (`herm::hermd::srf04_reading`,
  *                    seq, distance_mm, echo_us) every period to remote APO
  *                    APO, as a request that waits for its response.
- *   --count N        stops after N publications or readings sent (0: never;
- *                    a reading waits until its APO is discovered).
+ *   --count N        N publications or readings, counted once sent (0: no
+ *                    limit; a reading waits until its APO is discovered).
+ *                    With --publish it then exits; with --send it stays for
+ *                    the responses, until --max-seconds or a signal.
  *
  * Built with HERMC_AUTH=1 (herm-mcu-board-keyed), it joins a keyed network
  * (hermd's `auth` section, docs/user-guide.md) with the same settings:
@@ -32,8 +34,8 @@
  *
  * Prints one flushed line per event: "ready ID", "neighbour MID",
  * "served N", "published N subscribers S", "sent N", "response N ok",
- * "response N error CODE", "response N timeout", "not ready N", "counters
- * ...". Exit status: 0 done (count reached, or SIGTERM/SIGINT), 1 the line
+ * "response N error CODE", "response N timeout", "not ready N", and at
+ * exit "counters ..." and "link ..." (what the line broke). Exit status: 0 done (count reached, or SIGTERM/SIGINT), 1 the line
  * failed, 2 bad arguments. */
 #define _DEFAULT_SOURCE
 #include <errno.h>
@@ -117,11 +119,11 @@ static uint8_t echo_handler(void *ctx, const uint8_t *req, size_t req_len,
   const uint8_t *text = NULL;
   size_t n = 0;
   if (hermc_pr_begin(&r, req, req_len) != 1u || !hermc_pr_element(&r, "@str"))
-    return 4;
+    return HERMC_EC_INVALID_PARAMETER;
   hermc_pr_bytes(&r, &text, &n);
   uint8_t echoed[256];
   if (hermc_pr_finish(&r) != HERMC_PR_OK || n > sizeof echoed - 5)
-    return 4;
+    return HERMC_EC_INVALID_PARAMETER;
   memcpy(echoed, "echo:", 5);
   memcpy(echoed + 5, text, n);
   struct hermc_pw w;
@@ -130,7 +132,7 @@ static uint8_t echo_handler(void *ctx, const uint8_t *req, size_t req_len,
   hermc_pw_bytes(&w, echoed, n + 5);
   *resp_len = hermc_pw_finish(&w);
   if (*resp_len == 0)
-    return 4; /* does not fit one packet */
+    return HERMC_EC_INVALID_PARAMETER; /* does not fit one packet */
   printf("served %lu\n", ++served);
   fflush(stdout);
   return 0;
@@ -250,6 +252,16 @@ static void print_counters(const struct hermc_module *m) {
          (unsigned long)c->tx_packets, (unsigned long)c->tx_dropped,
          (unsigned long)c->tx_hellos,
          (unsigned long)c->neighbour_changes);
+  /* What the line broke: frames (COBS, CRC-16) and packets (reassembly). */
+  const hermc_frame_stats *f = &m->rx.frame_stats;
+  const hermc_reasm_stats *r = &m->rx.reasm.stats;
+  printf("link bad_cobs %lu too_short %lu oversized %lu bad_crc %lu "
+         "malformed %lu orphans %lu lost %lu bad_checksum %lu timed_out %lu\n",
+         (unsigned long)f->bad_cobs, (unsigned long)f->too_short,
+         (unsigned long)f->oversized, (unsigned long)f->bad_crc,
+         (unsigned long)r->malformed, (unsigned long)r->orphans,
+         (unsigned long)r->lost, (unsigned long)r->bad_checksum,
+         (unsigned long)r->timed_out);
 #if HERMC_AUTH
   const struct hermc_auth_counters *a = &m->auth.counters;
   printf("auth signed %lu accepted %lu truncated %lu wrong_key_id %lu "

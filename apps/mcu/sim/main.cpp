@@ -1,6 +1,6 @@
 // herm-avr-sim: runs the sonar board's firmware (an ATmega128 ELF) in simavr,
 // in real time, with UART0 on a pseudo-terminal and an SRF04 on PB0 (trigger)
-// and PD4/ICP1 (echo). docs/mcu.md, "Running the board in simavr".
+// and PD4/ICP1 (echo). docs/mcu.md, "The SRF04 board" and "Testing a board".
 //
 //   herm-avr-sim --firmware herm-srf04-firmware.elf [--distance-mm N]
 //                [--script FILE] [--pty-link PATH | --device PATH]

@@ -150,7 +150,8 @@ int main(void) {
       last = now;
     srf04_measurement_t m;
     if (srf04_poll(clock_ms(), &m) == SRF04_READY) {
-      ++last_reading.seq;
+      if (++last_reading.seq == 0u) /* 0 means "no reading yet" */
+        last_reading.seq = 1u;
       last_reading.distance_mm = m.distance_mm;
       last_reading.echo_us = m.echo_us;
       send_reading(sonar);
