@@ -535,6 +535,53 @@ TEST_F(hermc_module_test, a_request_without_response_times_out_and_rediscovers) 
   EXPECT_FALSE(hermc_remote_ready(&m, r));
 }
 
+// One request timing out sends the remote back to discovery; another one
+// still pending to the same module gets its response all the same.
+TEST_F(hermc_module_test, a_timeout_of_one_request_does_not_orphan_anothers_response) {
+  int r = hermc_remote(&m, "sonar");
+  hermc_tick(&m, now);
+  drain();
+  uint8_t buf[64];
+  auto n = hermc_asl_answer_begin(m.remotes[0].query_id, 1, buf, sizeof buf);
+  n += hermc_asl_answer_entry_encode(0x33, "sonar", 5, "", 0, buf + n,
+                                     sizeof buf - n);
+  deliver(data(0x0020, self_id, take(buf, n)));
+  outcome a, b;
+  ASSERT_EQ(hermc_request(&m, r, nullptr, 0, on_response, &a, 500), HERMC_OK);
+  ASSERT_EQ(hermc_request(&m, r, nullptr, 0, on_response, &b, 5000), HERMC_OK);
+  auto out = drain();
+  ASSERT_EQ(out.size(), 2u);
+  auto rid_b = out[1].asl.request_id;
+  advance(550);
+  EXPECT_EQ(a.status, HERMC_STATUS_TIMEOUT);
+  EXPECT_FALSE(hermc_remote_ready(&m, r));
+  n = hermc_asl_response_ok_header(rid_b, buf, sizeof buf);
+  buf[n++] = 0x01;
+  deliver(data(0x0020, self_id, take(buf, n)));
+  EXPECT_EQ(b.calls, 1);
+  EXPECT_EQ(b.status, HERMC_STATUS_OK);
+  EXPECT_EQ(m.counters.rx_unexpected_response, 0u);
+}
+
+// A boot counter makes instances that differ in a few bits: the ids of two
+// boots still start far apart, so a late reply to the last boot's query or
+// request is not taken for one of this boot's.
+TEST_F(hermc_module_test, ids_of_consecutive_boots_start_apart) {
+  hermc_module boot1{}, boot2{};
+  hermc_config c1, c2;
+  hermc_config_default(&c1, self_id, (uint64_t{1} << 16) | self_id);
+  hermc_config_default(&c2, self_id, (uint64_t{2} << 16) | self_id);
+  ASSERT_EQ(hermc_init(&boot1, &c1), HERMC_OK);
+  ASSERT_EQ(hermc_init(&boot2, &c2), HERMC_OK);
+  auto apart = [](uint32_t x, uint32_t y) {
+    uint32_t d = x - y;
+    return d > 0x10000u && uint32_t(0u - d) > 0x10000u;
+  };
+  EXPECT_TRUE(apart(boot1.next_query_id, boot2.next_query_id));
+  EXPECT_TRUE(apart(boot1.next_request_id, boot2.next_request_id));
+  EXPECT_TRUE(apart(boot1.next_flood_id, boot2.next_flood_id));
+}
+
 TEST_F(hermc_module_test, an_apo_gone_error_ends_the_request_and_rediscovers) {
   int r = hermc_remote(&m, "sonar");
   hermc_tick(&m, now);

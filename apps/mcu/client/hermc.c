@@ -214,7 +214,9 @@ static void on_response(struct hermc_module *m, uint16_t src,
     for (i = 0; i < HERMC_MAX_PENDING; ++i) {
       struct hermc_pending *p = &m->pending[i];
       struct hermc_remote_slot *r = &m->remotes[p->remote];
-      if (p->request_id == 0 || rid != p->request_id || r->module != src)
+      /* The module the request went to, not the remote's current one: a
+       * rediscovery for another request must not orphan this response. */
+      if (p->request_id == 0 || rid != p->request_id || p->module != src)
         continue;
       p->request_id = 0; /* free before the callback, which may reuse it */
       ++m->counters.responses_received;
@@ -645,13 +647,23 @@ int hermc_init(struct hermc_module *m, const struct hermc_config *cfg) {
   m->cfg = *cfg;
   if (m->cfg.discovery_min_ms == 0)
     m->cfg.discovery_min_ms = 1;
+  /* Deadlines are compared on half the 32-bit clock (due()). */
+  if (m->cfg.discovery_max_ms > MAX_LEASE_MS)
+    m->cfg.discovery_max_ms = MAX_LEASE_MS;
+  if (m->cfg.request_timeout_ms > MAX_LEASE_MS)
+    m->cfg.request_timeout_ms = MAX_LEASE_MS;
   hermc_link_rx_init(&m->rx, cfg->escaped != 0);
   hermc_link_tx_init(&m->tx, cfg->escaped != 0);
-  /* Ids of this boot start from its instance, so that a reply to the
-   * previous boot's query or request is not taken for one of ours. */
-  m->next_flood_id = (uint32_t)cfg->instance | 1u;
-  m->next_query_id = (uint32_t)(cfg->instance >> 32);
-  m->next_request_id = (uint32_t)(cfg->instance >> 16) | 1u;
+  /* Ids of this boot start from its whole instance, mixed, so that a
+   * reply to the previous boot's query or request is not taken for one of
+   * ours even when instances differ in a few bits (a boot counter). */
+  {
+    uint32_t s = ((uint32_t)cfg->instance ^ (uint32_t)(cfg->instance >> 32))
+                 * 2654435761u;
+    m->next_flood_id = s | 1u;
+    m->next_query_id = s ^ 0x9E3779B9u;
+    m->next_request_id = (s ^ 0x7F4A7C15u) | 1u;
+  }
   return HERMC_OK;
 }
 
@@ -810,9 +822,14 @@ int hermc_request(struct hermc_module *m, int r, const uint8_t *payload,
   rc = send_data(m, rem->module, 0, 14u + len);
   if (rc != HERMC_OK || !slot)
     return rc;
+  if (!timeout_ms)
+    timeout_ms = m->cfg.request_timeout_ms;
+  /* Deadlines are compared on half the 32-bit clock (due()). */
+  if (timeout_ms > MAX_LEASE_MS)
+    timeout_ms = MAX_LEASE_MS;
   slot->request_id = rid;
-  slot->deadline_ms = m->now_ms
-                      + (timeout_ms ? timeout_ms : m->cfg.request_timeout_ms);
+  slot->deadline_ms = m->now_ms + timeout_ms;
+  slot->module = rem->module;
   slot->remote = (uint8_t)r;
   slot->fn = fn;
   slot->ctx = ctx;
@@ -846,8 +863,12 @@ int hermc_publish(struct hermc_module *m, int t, const uint8_t *payload,
   topic = &m->topics[t];
   name = topic->name;
   name_len = cstr_len(name);
-  if (7u + name_len + len > body_cap(m, HERMC_DATA_HEADER_SIZE))
-    return HERMC_ERR_TOO_BIG;
+  {
+    /* Subtracted, not added: no wrap with a 16-bit size_t. */
+    size_t cap = body_cap(m, HERMC_DATA_HEADER_SIZE);
+    if (name_len + 7u > cap || len > cap - 7u - name_len)
+      return HERMC_ERR_TOO_BIG;
+  }
   ++topic->seq;
   for (i = 0; i < HERMC_MAX_SUBSCRIBERS; ++i) {
     const struct hermc_subscriber *s = &m->subscribers[i];

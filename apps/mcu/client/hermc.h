@@ -130,6 +130,7 @@ struct hermc_remote_slot {
 struct hermc_pending {
   uint32_t request_id; /* 0: free slot (the wire's 64-bit id, upper half 0) */
   uint32_t deadline_ms;
+  uint16_t module;     /* the module it went to: its response comes from it */
   uint8_t remote;
   hermc_response_fn fn;
   void *ctx;

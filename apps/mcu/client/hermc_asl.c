@@ -99,8 +99,10 @@ enum field {
   F_U32      /* u32 = u32 */
 };
 
-#define LAYOUT(a, b, c, d) \
-  (uint16_t)((a) | (b) << 4 | (c) << 8 | (d) << 12)
+/* Unsigned operands: with a 16-bit int (AVR) `9 << 12` overflows int. */
+#define LAYOUT(a, b, c, d)                                                \
+  (uint16_t)((unsigned)(a) | (unsigned)(b) << 4 | (unsigned)(c) << 8    \
+             | (unsigned)(d) << 12)
 
 /* Indexed by kind - 1 (HERMC_ASL_QUERY .. HERMC_ASL_ACK). In flash on AVR,
  * where const data would otherwise be copied to RAM. */
