@@ -488,7 +488,11 @@ public:
         }
         dev.options[key] = option(x);
       }
+      std::map<std::string, int> key_lines;
+      for (auto& x : fs)
+        key_lines[x.path.substr(prefix)] = x.line();
       cfg.module.devices.push_back(std::move(dev));
+      cfg.device_key_lines.push_back(std::move(key_lines));
       cfg.device_lines.push_back(line);
     });
   }
@@ -782,6 +786,58 @@ caf::expected<file_config> parse_config(const std::string& text,
     return make_error(ec::invalid_config,
                       path + ":" + std::to_string(line) + ": " + e.msg);
   }
+}
+
+caf::error check_channels(const file_config& cfg) {
+  auto& devs = cfg.module.devices;
+  for (size_t i = 0; i < devs.size(); ++i) {
+    auto& dev = devs[i];
+    auto* kind = find_link_kind(dev.kind);
+    if (kind == nullptr || kind->check == nullptr)
+      continue;
+    auto err = kind->check(dev);
+    if (!err)
+      continue;
+    auto& ctx = err.context();
+    auto what = ctx.match_elements<std::string>() ? ctx.get_as<std::string>(0)
+                                                  : render(err);
+    // The field names the channel already.
+    auto prefix = "device '" + dev.name + "': ";
+    if (what.rfind(prefix, 0) == 0)
+      what.erase(0, prefix.size());
+    // Which key the message is about: an option it names ("option
+    // 'peers'", one of the unknown options), else the interface.
+    auto unknown = what.find("unknown option");
+    auto unknown_end = what.find(" for link kind");
+    auto names = [&](const std::string& key) {
+      if (what.find("option '" + key + "'") != std::string::npos)
+        return true;
+      return unknown != std::string::npos && unknown_end != std::string::npos
+             && what.substr(unknown, unknown_end - unknown)
+                    .find("'" + key + "'")
+                  != std::string::npos;
+    };
+    static const std::map<std::string, int> none;
+    auto& keys = i < cfg.device_key_lines.size() ? cfg.device_key_lines[i]
+                                                 : none;
+    auto at = "channels[" + std::to_string(i) + "]";
+    auto blame = [&](int line, const std::string& field) {
+      return make_error(ec::invalid_config, cfg.path + ":"
+                                              + std::to_string(line) + ": "
+                                              + field + ": " + what);
+    };
+    for (auto& [key, line] : keys)
+      if (key != "name" && key != "kind" && key != "interface" && names(key))
+        return blame(line, at + "." + key);
+    if (what.find("interface") != std::string::npos
+        || what.find("directory") != std::string::npos
+        || what.find("segment") != std::string::npos)
+      if (auto k = keys.find("interface"); k != keys.end())
+        return blame(k->second, at + ".interface");
+    return blame(i < cfg.device_lines.size() ? cfg.device_lines[i] : 0,
+                 at + " '" + dev.name + "'");
+  }
+  return caf::none;
 }
 
 caf::expected<file_config> load_config(const std::string& path) {

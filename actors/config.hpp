@@ -46,6 +46,9 @@ struct file_config {
   module_config module;
   /// Line of each channel entry, parallel to module.devices.
   std::vector<int> device_lines;
+  /// Line of each key of each channel entry ("interface", "peers", ...),
+  /// parallel to module.devices: where check_channels puts an error.
+  std::vector<std::map<std::string, int>> device_key_lines;
   std::vector<apo_config> apos;
   /// trace, debug, info, warn, error or off.
   std::string log_level = "info";
@@ -76,6 +79,17 @@ caf::expected<file_config> parse_config(const std::string& text,
 /// larger than 1 MiB) is ec::invalid_config naming it and the reason:
 /// "PATH: cannot read: No such file or directory".
 caf::expected<file_config> load_config(const std::string& path);
+
+/// Checks every channel's interface and options with its link kind's own
+/// check (link_kind::check: the parser the driver's open runs first, which
+/// touches no device), so that what a start would refuse is a
+/// configuration error instead: ec::invalid_config with the context
+/// "PATH:LINE: channels[I].KEY: WHAT" when the driver's message names an
+/// option (or the interface), "PATH:LINE: channels[I] 'NAME': WHAT" (the
+/// entry's line) otherwise. hermd runs it on --check, at start and on
+/// reload; parse_config does not (a program may add its kinds later).
+/// O(channels x options).
+caf::error check_channels(const file_config& cfg);
 
 /// The default control socket of a module named `name`:
 /// /run/herm/NAME.sock for root, else $XDG_RUNTIME_DIR/herm/NAME.sock, else

@@ -177,6 +177,14 @@ struct link_kind {
   const char* description;
   /// Opens the device. Errors name the device and what was wrong.
   caf::expected<link_driver_ptr> (*open)(const device_config& cfg);
+  /// Validates the device's interface and options exactly as `open` reads
+  /// them, touching no device, file or socket (open runs the same parser
+  /// first): none, or the error open would return for them
+  /// (ec::invalid_parameter, ec::invalid_address) naming the device and the
+  /// option. A configuration loader calls it so that a misspelled option is
+  /// a configuration error, not a start-up failure. Null: the kind checks
+  /// nothing before open (kinds added by programs may leave it out).
+  caf::error (*check)(const device_config& cfg) = nullptr;
 };
 
 /// Makes `kind` known to find_link_kind and link_kinds, for devices of a kind

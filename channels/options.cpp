@@ -155,14 +155,24 @@ option_reader::profile(const std::string& default_profile) {
 }
 
 caf::error option_reader::finish() const {
+  // At most this many unknown options named (a file may hold thousands).
+  constexpr size_t max_named = 8;
   std::string unknown;
+  size_t count = 0;
   for (auto& kv : cfg_.options)
-    if (used_.count(kv.first) == 0)
+    if (used_.count(kv.first) == 0 && count++ < max_named)
       unknown += (unknown.empty() ? "'" : ", '") + kv.first + "'";
-  if (unknown.empty())
+  if (count == 0)
     return caf::none;
-  return fail(ec::invalid_parameter, "unknown option(s) " + unknown + " for link kind '"
-                                       + cfg_.kind + "'");
+  if (count > max_named)
+    unknown += " and " + std::to_string(count - max_named) + " more";
+  // Every option the driver reads has been read by now: those it knows.
+  std::string known;
+  for (auto& k : used_)
+    known += (known.empty() ? "" : ", ") + k;
+  return fail(ec::invalid_parameter, "unknown option(s) " + unknown
+                                       + " for link kind '" + cfg_.kind
+                                       + "' (known: " + known + ")");
 }
 
 std::string format_double(double x) {

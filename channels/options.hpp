@@ -40,7 +40,9 @@ public:
   /// "frame_overhead_bits" override its fields.
   caf::expected<link_profile> profile(const std::string& default_profile);
 
-  /// ec::invalid_parameter naming every option that was never read.
+  /// ec::invalid_parameter naming every option that was never read, and
+  /// the ones that were (the options the driver knows, when it reads them
+  /// all before calling finish, as every built-in kind does).
   caf::error finish() const;
 
   /// An error of kind `code` prefixed with "device 'NAME': ".

@@ -32,6 +32,9 @@ reachability route_event(agent_impl self, module_id d) {
   now.neighbour = nh->neighbour;
   if (auto n = st.neighbours.find(*nh))
     now.next = n->id;
+  if (auto ci = st.channels.find(nh->channel); ci != st.channels.end())
+    now.device = ci->second.info.device;
+  now.link_address = link_address_text(self, *nh);
   if (auto adv = st.table.advertisement(d)) {
     now.hops = adv->hops[0];
     now.cost = adv->metrics[0];
@@ -56,6 +59,8 @@ void tell_route_changes(agent_impl self, const std::vector<module_id>& dests) {
     if (i != st.told.end()) {
       now.was_reachable = true;
       now.old_cost = i->second.cost;
+      now.old_next = i->second.next;
+      now.old_device = i->second.device;
       auto& was = i->second;
       if (now.reachable && now.cost == was.cost && now.hops == was.hops
           && now.next == was.next && now.channel == was.channel
@@ -133,7 +138,7 @@ std::vector<route_info> route_rows(agent_impl self) {
     ri.size_class = r.size_class;
     ri.channel = r.via.channel;
     ri.neighbour = st.channels.count(r.via.channel) > 0
-                     ? std::to_string(r.via.neighbour)
+                     ? link_address_text(self, r.via)
                      : "?";
     ri.cost = r.cost;
     ri.hops = r.hops;
@@ -152,7 +157,7 @@ std::vector<neighbour_info> neighbour_rows(agent_impl self) {
   for (auto& [nh, n] : st.neighbours.entries()) {
     neighbour_info ni;
     ni.channel = nh.channel;
-    ni.link_address = std::to_string(nh.neighbour);
+    ni.link_address = link_address_text(self, nh);
     ni.id = n.id;
     ni.instance = n.instance;
     auto ci = st.channels.find(nh.channel);

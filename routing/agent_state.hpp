@@ -82,6 +82,15 @@ struct agent_state {
   /// hops it publishes in cfg.fast_routes (routing/fast_routes.hpp);
   /// bounded by route_cell::max_destinations().
   std::set<module_id> fast_dests;
+  /// Link addresses in their link's notation ("127.0.0.1:47001"), as the
+  /// channels named them when they first heard a peer (link_event
+  /// peer_heard): what neighbours, routes and logs show instead of the
+  /// packed number. Forgotten with the channel; bounded by
+  /// max_peer_names (further peers show as numbers).
+  std::map<next_hop, std::string> peer_names;
+  size_t max_peer_names() const {
+    return 2 * cfg.max_neighbours;
+  }
 
   /// How long a route learned from a neighbour that says hellos every
   /// `neighbour_interval` holds without a refresh: that neighbour's update
@@ -123,6 +132,20 @@ inline bool decoded(agent_impl self, const caf::expected<T>& x) {
     ++self->state.stats.rx_malformed;
   return static_cast<bool>(x);
 }
+
+/// The link address of `nh` in its link's notation, or its number when the
+/// channel never named it. O(log n).
+inline std::string link_address_text(agent_impl self, const next_hop& nh) {
+  auto& names = self->state.peer_names;
+  auto i = names.find(nh);
+  return i != names.end() ? i->second : std::to_string(nh.neighbour);
+}
+
+/// Tells cfg.on_neighbour that the neighbour at `nh` (module `id`,
+/// `instance`) came up or was lost, and why. No-op without a callback.
+/// routing_agent.cpp.
+void report_neighbour(agent_impl self, const next_hop& nh, module_id id,
+                      uint64_t instance, bool up, const char* reason);
 
 /// Publishes the next hops of `fast_dests` in cfg.fast_routes, or
 /// withdraws the snapshot while the fast path is not allowed (no address,

@@ -59,7 +59,8 @@ void neighbour_table::remove_channel(channel_id ch) {
   on_channel_.erase(ch);
 }
 
-std::vector<next_hop> neighbour_table::expire(time_point now) {
+std::vector<next_hop> neighbour_table::expire(time_point now,
+                                              std::vector<neighbour>* was) {
   std::vector<next_hop> lost;
   for (auto i = neighbours_.begin(); i != neighbours_.end();) {
     auto interval = std::max(i->second.interval, limits_.hello_interval);
@@ -68,6 +69,8 @@ std::vector<next_hop> neighbour_table::expire(time_point now) {
     auto next = std::next(i);
     if (now - i->second.last_hello > limit) {
       lost.push_back(i->first);
+      if (was != nullptr)
+        was->push_back(i->second);
       erase(i);
     }
     i = next;

@@ -78,8 +78,10 @@ public:
 
   /// Drops the neighbours whose last hello is older than hello_loss times
   /// their interval (at least ours) at `now`; returns them in next_hop
-  /// order. O(n).
-  std::vector<next_hop> expire(time_point now);
+  /// order, and appends what each was to `was` when given (parallel to the
+  /// result: for reports of lost neighbours). O(n).
+  std::vector<next_hop> expire(time_point now,
+                               std::vector<neighbour>* was = nullptr);
 
   /// The neighbour at `at`, or nullptr. O(log n).
   const neighbour* find(const next_hop& at) const;

@@ -63,6 +63,25 @@ const byte_buffer& make_hello(agent_impl self, bool leaving) {
   return encoded(self, h);
 }
 
+void report_neighbour(agent_impl self, const next_hop& nh, module_id id,
+                      uint64_t instance, bool up, const char* reason) {
+  auto& st = self->state;
+  if (!st.cfg.on_neighbour)
+    return;
+  neighbour_event ev;
+  ev.up = up;
+  ev.id = id;
+  ev.instance = instance;
+  ev.channel = nh.channel;
+  if (auto ci = st.channels.find(nh.channel); ci != st.channels.end()) {
+    ev.device = ci->second.info.device;
+    ev.link_kind = to_string(ci->second.code);
+  }
+  ev.link_address = link_address_text(self, nh);
+  ev.reason = reason;
+  st.cfg.on_neighbour(ev);
+}
+
 namespace {
 
 /// Hellos on every channel; a goodbye (interval 0) when `leaving`.
@@ -190,7 +209,7 @@ void flush_changes(agent_impl self) {
 
 // -- addressing -----------------------------------------------------------------
 
-/// "channel 1 (eth0) from link address 5, hello": where a packet came from,
+/// "channel 1 (eth0) from 127.0.0.1:47001, hello": where a packet came from,
 /// for id conflict reports; empty unless `about` is this module's id.
 std::string heard_at(agent_impl self, module_id about, channel_id ch,
                      link_addr src, const char* what) {
@@ -200,7 +219,7 @@ std::string heard_at(agent_impl self, module_id about, channel_id ch,
   auto ci = st.channels.find(ch);
   return "channel " + std::to_string(ch) + " ("
          + (ci != st.channels.end() ? ci->second.info.device : "?")
-         + ") from link address " + std::to_string(src) + ", " + what;
+         + ") from " + link_address_text(self, next_hop{ch, src}) + ", " + what;
 }
 
 /// A dispute over our static id (address_allocator): counted, reported to
@@ -408,6 +427,7 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
   if (h->interval_ms == 0) {
     // A goodbye: the neighbour leaves now; its routes go at once.
     if (st.neighbours.goodbye(nh, h->instance)) {
+      report_neighbour(self, nh, h->sender, h->instance, false, "goodbye");
       ++st.stats.rx_goodbyes;
       apply_change(self, st.table.remove_neighbour(nh));
     }
@@ -419,6 +439,8 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
   if (res == result::refused)
     return;
   if (res == result::added || res == result::restarted) {
+    report_neighbour(self, nh, h->sender, h->instance, true,
+                     res == result::added ? "hello" : "restarted");
     apply_change(self, st.table.set_neighbour(nh, ci->second.cost, ci->second.code));
     // Tell the new neighbour everything we know at once.
     send_update(self, st.table.destinations(), ch);
@@ -567,7 +589,13 @@ void tick(agent_impl self) {
     send_hellos(self);
   // Neighbours silent for too long are gone.
   table_change change;
-  for (auto& nh : st.neighbours.expire(now)) {
+  std::vector<neighbour_table::neighbour> was;
+  auto lost = st.neighbours.expire(now, st.cfg.on_neighbour ? &was : nullptr);
+  for (size_t i = 0; i < lost.size(); ++i) {
+    auto& nh = lost[i];
+    if (i < was.size())
+      report_neighbour(self, nh, was[i].id, was[i].instance, false,
+                       "hellos lost");
     auto c = st.table.remove_neighbour(nh);
     change.changed.insert(change.changed.end(), c.changed.begin(),
                           c.changed.end());
@@ -816,13 +844,29 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
     },
     [self](channel_down& down) {
       auto& st = self->state;
+      if (st.cfg.on_neighbour) {
+        auto& all = st.neighbours.entries();
+        for (auto i = all.lower_bound(next_hop{down.id, 0});
+             i != all.end() && i->first.channel == down.id; ++i)
+          report_neighbour(self, i->first, i->second.id, i->second.instance,
+                           false, "channel closed");
+      }
       st.channels.erase(down.id);
+      auto names = st.peer_names.lower_bound(next_hop{down.id, 0});
+      while (names != st.peer_names.end() && names->first.channel == down.id)
+        names = st.peer_names.erase(names);
       st.neighbours.remove_channel(down.id);
       apply_change(self, st.table.remove_channel(down.id));
     },
     [self](packet_received& pkt) { on_packet(self, pkt); },
-    [](link_event&) {
-      // Hellos, not link events, decide who is a neighbour.
+    [self](link_event& ev) {
+      // Hellos, not link events, decide who is a neighbour; a peer heard
+      // for the first time tells how its link address is written.
+      auto& st = self->state;
+      if (ev.kind == static_cast<uint8_t>(link_event_kind::peer_heard)
+          && !ev.detail.empty() && st.channels.count(ev.channel) > 0
+          && st.peer_names.size() < st.max_peer_names())
+        st.peer_names[next_hop{ev.channel, ev.peer}] = ev.detail;
     },
     [self](atom::close) { return leave(self); },
     [self](atom::tick) { tick(self); },

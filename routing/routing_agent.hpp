@@ -89,13 +89,22 @@ struct reachability {
   channel_id channel = 0;
   link_addr neighbour = 0;
   std::string path;
+  /// The channel's device name ("eth0") and the next hop's link address in
+  /// its link's notation ("127.0.0.1:47001", a CAN node id; the number when
+  /// the channel never named it), when reachable.
+  std::string device;
+  std::string link_address;
+  /// What the previous event said when `was_reachable`: its next hop's
+  /// module id and the device it was reached on.
+  module_id old_next = no_module;
+  std::string old_device;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, reachability& x) {
   return f(caf::meta::type_name("reachability"), x.id, x.reachable, x.hops,
            x.cost, x.was_reachable, x.old_cost, x.next, x.channel, x.neighbour,
-           x.path);
+           x.path, x.device, x.link_address, x.old_next, x.old_device);
 }
 
 inline bool operator==(const reachability& a, const reachability& b) {
@@ -103,8 +112,29 @@ inline bool operator==(const reachability& a, const reachability& b) {
          && a.cost == b.cost && a.was_reachable == b.was_reachable
          && a.old_cost == b.old_cost && a.next == b.next
          && a.channel == b.channel && a.neighbour == b.neighbour
-         && a.path == b.path;
+         && a.path == b.path && a.device == b.device
+         && a.link_address == b.link_address && a.old_next == b.old_next
+         && a.old_device == b.old_device;
 }
+
+/// A neighbour appeared or was lost: what routing_config::on_neighbour is
+/// told. Not a message.
+struct neighbour_event {
+  /// True: its first hello (or the first of a new instance: it restarted);
+  /// false: lost.
+  bool up = false;
+  module_id id = no_module;
+  uint64_t instance = 0;
+  channel_id channel = 0;
+  /// The channel's device name, link kind ("Ethernet") and the neighbour's
+  /// link address in the link's notation ("127.0.0.1:47001").
+  std::string device;
+  std::string link_kind;
+  std::string link_address;
+  /// Why: "hello", "restarted" (up); "goodbye", "hellos lost",
+  /// "channel closed" (down).
+  std::string reason;
+};
 
 /// One neighbour as the agent sees it.
 struct neighbour_info {
@@ -404,6 +434,11 @@ struct routing_config {
   /// comes back after falling silent. Empty: not reported (the counters in
   /// routing_stats still count).
   std::function<void(const id_conflict&)> on_id_conflict;
+  /// Called (in the agent's thread, must not block) once per neighbour
+  /// that appears (its first hello, or the first of a restarted instance)
+  /// and once per neighbour lost (goodbye, hellos lost, channel closed):
+  /// changes only, never per hello. Empty: not reported.
+  std::function<void(const neighbour_event&)> on_neighbour;
   /// Where the agent publishes the next hops of established routes for the
   /// module's senders (routing/fast_routes.hpp); start_module shares one
   /// with the application support layer. Null: nothing is published.

@@ -5,6 +5,10 @@
 //
 // Start-up is all or nothing: a bad config or a device that cannot be
 // opened stops hermd with the file, line and field before anything runs.
+// --check, a start and a reload check channel options alike, with each link
+// kind's own parser (check_channels): a misspelled option or a host name
+// where an IPv4 address is needed is a config error (exit 2), not a device
+// that fails to open.
 // SIGINT/SIGTERM: the module says goodbye on every channel (neighbours drop
 // its routes at once), stops its APOs and exits 0. SIGHUP, or `hermctl
 // reload`, re-reads the file and applies its channel changes: new channels
@@ -55,6 +59,7 @@
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/system.hpp"
 #include "apps/hermd/apo_kinds.hpp"
+#include "apps/hermd/change_log.hpp"
 #include "apps/hermd/testbed_types.hpp"
 #include "channels/fragmentation.hpp"
 #include "routing/module_id.hpp"
@@ -193,72 +198,63 @@ void trace_packet(const packet_trace& t) {
 }
 
 /// Logs every change of a destination's selected route, from the route
-/// event alone: one line per change, never a table query (a query per
-/// event made a flood of advertisements cost O(N^2)). At a bounded rate: a
-/// neighbour that advertises thousands of destinations must not make the
-/// daemon write thousands of lines (nor block on a full log pipe); what the
-/// bound holds back is summed up once a second.
-struct route_logger_state {
-  static inline const char* name = "hermd.route_logger";
-  /// Token bucket: `burst` lines at once (a network of a few hundred
-  /// modules starting up is logged in full), then `rate` per second.
+/// event alone (never a table query: a query per event made a flood of
+/// advertisements cost O(N^2)), and every link (neighbour) that comes up or
+/// goes down, as the agent's on_neighbour callback sends them here: one line
+/// per change (apps/hermd/change_log.hpp). At a bounded rate per kind: a
+/// neighbour that advertises thousands of destinations, or a flapping link,
+/// must not make the daemon write thousands of lines (nor block on a full
+/// log pipe); what the bound holds back is summed up once a second.
+/// Spawned before the module, so that no link event is missed; told the
+/// routing agent to subscribe to once it runs.
+struct change_logger_state {
+  static inline const char* name = "hermd.change_logger";
+  /// `burst` lines at once (a network of a few hundred modules starting up
+  /// is logged in full), then `rate` per second.
   static constexpr double burst = 200;
   static constexpr double rate = 20;
-  double tokens = burst;
-  std::chrono::steady_clock::time_point refilled = std::chrono::steady_clock::now();
-  uint64_t held_back = 0;
+  hermd::line_budget routes{burst, rate, std::chrono::steady_clock::now()};
+  hermd::line_budget links{burst, rate, std::chrono::steady_clock::now()};
   bool summary_due = false;
 
-  bool take() {
-    auto now = std::chrono::steady_clock::now();
-    std::chrono::duration<double> dt = now - refilled;
-    refilled = now;
-    tokens = std::min(burst, tokens + dt.count() * rate);
-    if (tokens < 1)
-      return false;
-    tokens -= 1;
-    return true;
+  /// True if a line may go out now; else schedules the summary.
+  template <class Self>
+  bool admit(Self* self, hermd::line_budget& budget) {
+    if (budget.take(std::chrono::steady_clock::now()))
+      return true;
+    if (!summary_due) {
+      summary_due = true;
+      self->delayed_send(self, 1s, atom::tick_v);
+    }
+    return false;
   }
 };
 
-caf::behavior route_logger(caf::stateful_actor<route_logger_state>* self,
-                           routing_agent_actor agent) {
-  self->send(agent, atom::subscribe_v, atom::routes_v,
-             caf::actor_cast<route_listener_actor>(self));
+caf::behavior change_logger(caf::stateful_actor<change_logger_state>* self) {
   return {
+    [self](caf::actor& agent) {
+      // The routing agent (a routing_agent_actor: typed handles have no
+      // type ID of their own to travel in a message).
+      self->send(caf::actor_cast<routing_agent_actor>(agent),
+                 atom::subscribe_v, atom::routes_v,
+                 caf::actor_cast<route_listener_actor>(self));
+    },
     [self](reachability& r) {
-      auto& st = self->state;
-      if (!st.take()) {
-        ++st.held_back;
-        if (!st.summary_due) {
-          st.summary_due = true;
-          self->delayed_send(self, 1s, atom::tick_v);
-        }
-        return;
-      }
-      if (!r.reachable) {
-        spdlog::info("route to {} withdrawn: unreachable (was cost {})",
-                     to_hex(r.id), r.old_cost);
-        return;
-      }
-      auto next = r.next != no_module
-                    ? to_hex(r.next)
-                    : "link address " + std::to_string(r.neighbour);
-      auto was = r.was_reachable ? fmt::format(" (was {})", r.old_cost)
-                                 : std::string{" (new)"};
-      spdlog::info("route to {}: cost {}{}, {} hop(s), next hop {} on channel "
-                   "{}, path {}",
-                   to_hex(r.id), r.cost, was, r.hops, next, r.channel, r.path);
+      if (self->state.admit(self, self->state.routes))
+        spdlog::info("{}", hermd::route_line(r));
+    },
+    [self](std::string& link_line) {
+      if (self->state.admit(self, self->state.links))
+        spdlog::info("{}", link_line);
     },
     [self](atom::tick) {
       auto& st = self->state;
       st.summary_due = false;
-      if (st.held_back == 0)
-        return;
-      spdlog::info("{} more route changes not logged (at most {} lines a "
-                   "second; hermctl routes shows the table)",
-                   st.held_back, route_logger_state::rate);
-      st.held_back = 0;
+      auto text = hermd::held_back_line(st.routes.held_back(),
+                                        st.links.held_back(),
+                                        change_logger_state::rate);
+      if (!text.empty())
+        spdlog::info("{}", text);
     },
   };
 }
@@ -307,15 +303,22 @@ public:
     mc.device_origins = origins(cfg_);
     mc.routing.tracer = trace_packet;
     mc.routing.on_id_conflict = on_id_conflict;
+    route_logger_ = sys_.spawn(change_logger);
+    // Runs in the agent's thread: formats there, writes in the logger.
+    mc.routing.on_neighbour = [logger = route_logger_](const neighbour_event& e) {
+      caf::anon_send(logger, hermd::link_line(e));
+    };
     mc.on_failure = on_module_failure;
     auto m = start_module(sys_, mc);
-    if (!m)
+    if (!m) {
+      stop(false);
       return m.error();
+    }
     m_ = *m;
     auto self = caf::scoped_actor{sys_};
     for (auto& ch : cfg_.module.devices)
       spdlog::info("channel '{}' up: {} {}", ch.name, ch.kind, ch.interface);
-    route_logger_ = sys_.spawn(route_logger, m_.agent);
+    caf::anon_send(route_logger_, caf::actor_cast<caf::actor>(m_.agent));
     control_ = spawn_control(sys_, m_, cfg_.name);
     watch_module_actor(m_, caf::actor_cast<caf::actor>(control_),
                        "herm.control");
@@ -405,6 +408,9 @@ public:
   std::string reload_json() {
     std::lock_guard<std::mutex> guard{reload_mtx_};
     auto fresh = load_config(cfg_.path);
+    if (fresh)
+      if (auto err = check_channels(*fresh))
+        fresh = std::move(err);
     if (!fresh) {
       spdlog::error("reload refused: {}", render(fresh.error()));
       return R"({"ok":false,"error":{"code":"invalid_config","message":)"
@@ -555,6 +561,10 @@ int main(int argc, char** argv) {
   auto cfg = load_config(path);
   if (!cfg) {
     std::cerr << "hermd: " << render(cfg.error()) << std::endl;
+    return 2;
+  }
+  if (auto err = check_channels(*cfg)) {
+    std::cerr << "hermd: " << render(err) << std::endl;
     return 2;
   }
   if (auto err = check_apos(*cfg)) {

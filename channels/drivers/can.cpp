@@ -389,6 +389,11 @@ caf::expected<link_driver_ptr> open_can(const device_config& cfg) {
   return link_driver_ptr{std::move(driver)};
 }
 
+caf::error check_can(const device_config& cfg) {
+  auto x = can::read_config(cfg);
+  return x ? caf::error{} : std::move(x.error());
+}
+
 } // namespace
 
 const link_kind& can_link_kind() {
@@ -396,7 +401,7 @@ const link_kind& can_link_kind() {
     "can",
     "CAN 2.0B / CAN FD bus: SocketCAN interface (can0, vcan0) or an emulated "
     "bus between processes (emu:/path) with arbitration and bit-rate pacing",
-    open_can};
+    open_can, check_can};
   return kind;
 }
 

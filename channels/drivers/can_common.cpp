@@ -63,11 +63,9 @@ caf::expected<can_config> read_config(const device_config& cfg) {
                   "option 'id_format' expects 29bit or 11bit, got '" + format
                     + "'");
   auto max_node = can::max_node(c.format);
-  if (!r.has("node"))
-    return r.fail(ec::invalid_parameter,
-                  "option 'node' is required: this module's node id on the "
-                  "bus, 1.."
-                    + std::to_string(max_node));
+  // A missing node is reported after the unknown options: a misspelled
+  // "nod" says so rather than that "node" is missing.
+  bool node_given = r.has("node");
   if (auto err = read_into(c.node, r.u64("node", 0, 1, max_node)))
     return err;
   if (auto err = read_into(c.fd, r.flag("fd", false)))
@@ -101,6 +99,11 @@ caf::expected<can_config> read_config(const device_config& cfg) {
   }
   if (auto err = r.finish())
     return err;
+  if (!node_given)
+    return r.fail(ec::invalid_parameter,
+                  "option 'node' is required: this module's node id on the "
+                  "bus, 1.."
+                    + std::to_string(max_node));
   return c;
 }
 

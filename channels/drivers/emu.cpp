@@ -582,6 +582,11 @@ caf::expected<link_driver_ptr> open_emu(const device_config& cfg) {
   return link_driver_ptr{std::move(driver)};
 }
 
+caf::error check_emu(const device_config& cfg) {
+  auto x = read_config(cfg);
+  return x ? caf::error{} : std::move(x.error());
+}
+
 } // namespace
 
 const link_kind& emu_link_kind() {
@@ -589,7 +594,7 @@ const link_kind& emu_link_kind() {
     "emu",
     "emulated medium between processes on this machine: a directory of unix "
     "datagram sockets with bandwidth pacing, MTU, latency, jitter and loss",
-    open_emu};
+    open_emu, check_emu};
   return kind;
 }
 

@@ -12,6 +12,7 @@
 #include <mutex>
 #include <vector>
 
+#include "channels/drivers/params.hpp"
 #include "channels/error.hpp"
 #include "channels/link_driver.hpp"
 #include "channels/options.hpp"
@@ -148,18 +149,38 @@ private:
   std::vector<std::shared_ptr<frame_handler>> receivers_;
 };
 
-caf::expected<link_driver_ptr> open_inproc(const device_config& cfg) {
+/// An inproc device's options: its link profile and the station it asks
+/// for (0: the first free one).
+struct inproc_options {
+  link_profile profile;
+  uint64_t station = 0;
+};
+
+/// The one parser of open_inproc and the kind's check; touches no segment.
+caf::expected<inproc_options> read_inproc_options(const device_config& cfg) {
   option_reader opts{cfg};
-  auto profile = opts.profile("ethernet");
-  if (!profile)
-    return profile.error();
-  auto station = opts.u64("station", 0, 0, 65534);
-  if (!station)
-    return station.error();
+  inproc_options result;
+  if (auto err = read_into(result.profile, opts.profile("ethernet")))
+    return err;
+  if (auto err = read_into(result.station, opts.u64("station", 0, 0, 65534)))
+    return err;
   if (auto err = opts.finish())
     return err;
   if (cfg.interface.empty())
     return opts.fail(ec::invalid_address, "an inproc device needs a segment name");
+  return result;
+}
+
+caf::error check_inproc(const device_config& cfg) {
+  auto x = read_inproc_options(cfg);
+  return x ? caf::error{} : std::move(x.error());
+}
+
+caf::expected<link_driver_ptr> open_inproc(const device_config& cfg) {
+  auto parsed = read_inproc_options(cfg);
+  if (!parsed)
+    return std::move(parsed.error());
+  option_reader opts{cfg};
   auto& reg = registry::get();
   std::lock_guard<std::mutex> guard{reg.mtx};
   auto& seg = reg.segments[cfg.interface];
@@ -169,7 +190,7 @@ caf::expected<link_driver_ptr> open_inproc(const device_config& cfg) {
   // An entry is either a running station or a reservation from an open
   // whose start has not happened yet.
   auto taken = [&](link_addr x) { return seg.stations.count(x) > 0; };
-  link_addr addr = *station;
+  link_addr addr = parsed->station;
   if (addr == 0) {
     addr = 1;
     while (taken(addr))
@@ -182,7 +203,7 @@ caf::expected<link_driver_ptr> open_inproc(const device_config& cfg) {
   // Reserve the station until start() installs the real handler.
   seg.stations[addr] = std::weak_ptr<frame_handler>{};
   return link_driver_ptr{
-    std::make_shared<inproc_driver>(cfg.interface, addr, *profile)};
+    std::make_shared<inproc_driver>(cfg.interface, addr, parsed->profile)};
 }
 
 } // namespace
@@ -235,7 +256,7 @@ size_t stations(const std::string& name) {
 
 const link_kind& inproc_link_kind() {
   static const link_kind kind{"inproc", "in-process medium for tests",
-                              open_inproc};
+                              open_inproc, check_inproc};
   return kind;
 }
 

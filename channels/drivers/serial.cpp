@@ -686,13 +686,18 @@ caf::expected<link_driver_ptr> open_serial(const device_config& cfg) {
   return link_driver_ptr{std::move(drv)};
 }
 
+caf::error check_serial(const device_config& cfg) {
+  auto x = serial::read_settings(cfg);
+  return x ? caf::error{} : std::move(x.error());
+}
+
 } // namespace
 
 const link_kind& serial_link_kind() {
   static const link_kind kind{
     "serial",
     "serial line (RS232C, USB serial, USB CDC-ACM): COBS frames with CRC-16",
-    open_serial};
+    open_serial, check_serial};
   return kind;
 }
 

@@ -510,12 +510,24 @@ caf::expected<std::vector<link_addr>> parse_peers(option_reader& opts) {
   }
 }
 
-caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
+/// What a udp device's interface and options say, read and checked without
+/// touching a socket: the one parser of open_udp and the kind's check.
+struct udp_options {
+  udp_settings set;
+  std::string bind_device;
+  /// SO_RCVBUF, SO_SNDBUF when given.
+  std::optional<uint64_t> bufs[2];
+};
+
+const char* const udp_buf_keys[2] = {"rcvbuf", "sndbuf"};
+
+caf::expected<udp_options> read_udp_options(const device_config& cfg) {
   option_reader opts{cfg};
   auto fail = [&](ec code, const std::string& what) {
     return opts.fail(code, what);
   };
-  udp_settings set;
+  udp_options result;
+  auto& set = result.set;
   set.device = cfg.name;
   if (auto err = read_into(set.profile, opts.profile("ethernet")))
     return err;
@@ -542,23 +554,41 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
                       "(e.g. 10.77.0.255:47000)");
     set.broadcast = *addr;
   }
-  auto bind_device = opts.str("bind_device");
+  result.bind_device = opts.str("bind_device");
   if (opts.has("bind_device")
-      && (bind_device.empty() || bind_device.size() >= IFNAMSIZ))
+      && (result.bind_device.empty() || result.bind_device.size() >= IFNAMSIZ))
     return fail(ec::invalid_parameter,
                 "option 'bind_device' expects an interface name of 1 to "
                   + std::to_string(IFNAMSIZ - 1) + " characters, got '"
-                  + bind_device + "'");
-  std::optional<uint64_t> bufs[2];
-  const char* buf_keys[2] = {"rcvbuf", "sndbuf"};
+                  + result.bind_device + "'");
   for (int i = 0; i < 2; ++i)
-    if (opts.has(buf_keys[i])) {
-      if (auto err
-          = read_into(bufs[i], opts.u64(buf_keys[i], 0, 1024, INT_MAX / 2)))
+    if (opts.has(udp_buf_keys[i])) {
+      if (auto err = read_into(result.bufs[i],
+                               opts.u64(udp_buf_keys[i], 0, 1024, INT_MAX / 2)))
         return err;
     }
   if (auto err = opts.finish())
     return err;
+  return result;
+}
+
+caf::error check_udp(const device_config& cfg) {
+  auto x = read_udp_options(cfg);
+  return x ? caf::error{} : std::move(x.error());
+}
+
+caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
+  auto parsed = read_udp_options(cfg);
+  if (!parsed)
+    return std::move(parsed.error());
+  option_reader opts{cfg};
+  auto fail = [&](ec code, const std::string& what) {
+    return opts.fail(code, what);
+  };
+  auto& set = parsed->set;
+  auto& bind_device = parsed->bind_device;
+  auto& bufs = parsed->bufs;
+  auto& buf_keys = udp_buf_keys;
   // -- socket --
   unique_fd sock{::socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC,
                           0)};
@@ -616,7 +646,8 @@ caf::expected<link_driver_ptr> open_udp(const device_config& cfg) {
 } // namespace
 
 const link_kind& udp_link_kind() {
-  static const link_kind kind{"udp", "UDP/IPv4 (Ethernet)", open_udp};
+  static const link_kind kind{"udp", "UDP/IPv4 (Ethernet)", open_udp,
+                              check_udp};
   return kind;
 }
 

@@ -457,6 +457,10 @@ TEST_F(routing_sim, route_listeners_learn_reachability_changes) {
   withdrawn.id = id_of(2);
   withdrawn.was_reachable = true;
   withdrawn.old_cost = 20;
+  // What the route was: through module 1, on the device it was told with.
+  withdrawn.old_next = id_of(1);
+  withdrawn.old_device = now[id_of(2)].device;
+  EXPECT_FALSE(withdrawn.old_device.empty());
   EXPECT_EQ(log->back(), withdrawn);
   log->clear();
   net.start_module(2);
