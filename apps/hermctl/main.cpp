@@ -27,6 +27,8 @@
 #include <tuple>
 #include <vector>
 
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -35,7 +37,9 @@
 #include "actors/runtime/error.hpp"
 #include "apps/hermctl/format.hpp"
 #include "apps/hermctl/graphviz.hpp"
+#include "apps/hermctl/local_modules.hpp"
 #include "apps/hermctl/views.hpp"
+#include "apps/hermctl/watch.hpp"
 #include "channels/link_profile.hpp"
 #include "routing/metric.hpp"
 #include "routing/module_id.hpp"
@@ -78,6 +82,9 @@ struct options {
   double coef = 1.0;
   std::string device;
   std::string state;
+  bool quiet = false;
+  double interval_s = 1.0;
+  uint64_t frames = 0;
 };
 
 herm::module_id parse_mid(const std::string& text) {
@@ -434,6 +441,29 @@ int cmd_cost(const options& o) {
   return exit_ok;
 }
 
+/// `watch` (apps/hermctl/watch.hpp): frames of module `m` until --count.
+int cmd_watch(client& c, const options& o, herm::module_id m) {
+  if (o.json_out)
+    throw failure{exit_usage, "watch draws for people: for scripts, poll "
+                              "'hermctl stats --json' or 'routes --json'"};
+  watch_options w;
+  w.module = m;
+  w.interval = std::chrono::milliseconds(static_cast<int64_t>(o.interval_s * 1000));
+  w.count = o.frames;
+  w.ansi = ::isatty(STDOUT_FILENO) == 1;
+  w.width = w.ansi ? 80 : 0;
+  auto call = [&c](json req, herm::module_id at) {
+    try {
+      return watch_reply{true, c.call(std::move(req), at), {}};
+    } catch (const failure& f) {
+      if (f.status != exit_failed)
+        throw;
+      return watch_reply{false, {}, f.message};
+    }
+  };
+  run_watch(call, w, std::cout);
+  return exit_ok;
+}
 
 } // namespace
 
@@ -445,10 +475,12 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   auto* socket_opt = app.add_option("-s,--socket", o.socket,
                                     "control socket (default: $HERM_CONTROL, "
-                                    "else the default socket of --name)");
-  app.add_option("--name", o.name, "module name whose default socket to use "
-                                   "(default: hermd)")
+                                    "else the socket of --name, else the one "
+                                    "module running here)");
+  app.add_option("--name", o.name, "module name whose socket in the runtime "
+                                   "directory to use")
     ->excludes(socket_opt);
+  app.add_flag("--quiet", o.quiet, "do not say which module was found");
   app.add_option("--module", o.module,
                  "run the command on this module (0x4E or 78), through the "
                  "local one");
@@ -494,6 +526,15 @@ int main(int argc, char** argv) {
   link->add_option("STATE", o.state, "up or down")->required();
   auto* reload = app.add_subcommand("reload", "make hermd re-read its "
                                               "configuration");
+  auto* modules = app.add_subcommand("modules", "the modules running on this "
+                                                "machine (their control sockets)");
+  modules->alias("ls");
+  auto* watch = app.add_subcommand("watch", "a live view: modules, links with "
+                                            "rates, route changes");
+  watch->add_option("--interval", o.interval_s,
+                    "seconds between frames (default 1)")
+    ->check(CLI::Range(0.1, 3600.0));
+  watch->add_option("--count", o.frames, "stop after N frames (default: never)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -512,12 +553,36 @@ int main(int argc, char** argv) {
                                   "topology: they start at the local module"};
       module = parse_mid(o.module);
     }
+    if (modules->parsed()) {
+      if (module != herm::no_module)
+        throw failure{exit_usage, "--module does not apply to modules: it "
+                                  "lists this machine's modules"};
+      auto dir = runtime_dir();
+      show_modules(std::cout,
+                   list_modules(scan_runtime_dir(dir),
+                                std::chrono::milliseconds(o.timeout_ms)),
+                   dir, o.json_out);
+      return exit_ok;
+    }
     std::string path = o.socket;
     if (path.empty()) {
       auto* env = std::getenv("HERM_CONTROL");
       bool named = app.count("--name") > 0;
-      path = env != nullptr && *env != '\0' && !named ? env
-                                                      : herm::default_control_socket(o.name);
+      if (env != nullptr && *env != '\0' && !named) {
+        path = env;
+      } else if (named) {
+        path = socket_of(o.name);
+      } else {
+        // Nothing named a module: the one running here, if there is one.
+        auto dir = runtime_dir();
+        auto found = scan_runtime_dir(dir);
+        auto pick = choose_module(found, o.name);
+        if (pick.kind == module_choice::ambiguous)
+          throw failure{exit_usage, ambiguous_message(found, dir)};
+        path = pick.kind == module_choice::use ? pick.chosen.path : socket_of(o.name);
+        if (pick.kind == module_choice::use && !o.json_out && !o.quiet)
+          std::cerr << using_line(pick.chosen) << '\n';
+      }
     }
     client c{path, o.timeout_ms};
     if (info->parsed())
@@ -550,6 +615,8 @@ int main(int argc, char** argv) {
     }
     if (reload->parsed())
       return show(c, o, module, {{"cmd", "reload"}}, show_reload);
+    if (watch->parsed())
+      return cmd_watch(c, o, module);
     return exit_usage;
   } catch (const failure& f) {
     std::cout.flush();
