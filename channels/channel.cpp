@@ -303,6 +303,15 @@ channel_actor::behavior_type channel_fun(channel_impl self,
         // does not monitor us itself.
         self->attach(caf::default_attachable::make_monitor(self->address(),
                                                            reader.address()));
+        // A late reader learns the peers heard before it came, as if they
+        // were heard now: how their addresses are written (the routing
+        // agent shows them so). Bounded by max_known_peers.
+        auto& st = self->state;
+        for (auto p : st.peers)
+          self->send(reader,
+                     link_event{st.info.id,
+                                static_cast<uint8_t>(link_event_kind::peer_heard),
+                                p, st.driver->format_addr(p)});
         readers.push_back(std::move(reader));
       }
       return current_info(self);

@@ -37,6 +37,7 @@
 #include "actors/runtime/error.hpp"
 #include "apps/hermctl/format.hpp"
 #include "apps/hermctl/graphviz.hpp"
+#include "apps/hermctl/topology.hpp"
 #include "apps/hermctl/local_modules.hpp"
 #include "apps/hermctl/views.hpp"
 #include "apps/hermctl/watch.hpp"
@@ -283,66 +284,56 @@ int cmd_topology(client& c, const options& o) {
     if (r.value("selected", false) && r.value("size_class", 0) == 0)
       if (auto id = mid_number(r["destination"]); id <= 0xFFFF)
         modules.insert(static_cast<herm::module_id>(id));
-  std::map<herm::module_id, std::string> names;
-  names[self_id] = me.value("name", std::string{});
-  // One edge per pair of modules and link kind, with its class-0 cost.
-  std::map<std::tuple<herm::module_id, herm::module_id, std::string>, json>
-    edges;
+  // What each module says of itself (name, APOs, channels) and its
+  // neighbours; apps/hermctl/topology.hpp draws it.
+  topo_input in;
   for (auto id : modules) {
     auto at = id == self_id ? herm::no_module : id;
     try {
-      if (id != self_id)
-        names[id] = c.call({{"cmd", "echo"}}, at).value("name", std::string{});
-      for (auto& n : c.call({{"cmd", "neighbors"}}, at)) {
+      auto echo = id == self_id ? me : c.call({{"cmd", "echo"}}, at);
+      auto rows = c.call({{"cmd", "neighbors"}}, at);
+      auto& m = in.modules[id];
+      m.name = echo.value("name", std::string{});
+      for (auto& ch : c.call({{"cmd", "channels"}}, at))
+        if (ch.value("routed", true))
+          m.channels[ch.value("id", 0u)] = ch.value("device", std::string{});
+      for (auto& a : c.call({{"cmd", "apps"}}, at))
+        if (a.value("local", false)
+            && a.value("name", std::string{}) != "herm.control")
+          m.apos.push_back(a.value("name", std::string{}));
+      for (auto& n : rows) {
         auto other = mid_number(n["module"]);
         if (other > 0xFFFF)
           continue;
-        auto a = std::min<herm::module_id>(id, static_cast<herm::module_id>(other));
-        auto b = std::max<herm::module_id>(id, static_cast<herm::module_id>(other));
         auto cost = n.value("cost", json::array());
-        edges[{a, b, n.value("link_kind", std::string{"?"})}]
-          = cost.empty() ? json(nullptr) : cost[0];
-        names.emplace(static_cast<herm::module_id>(other), "");
+        in.neighbours.push_back(
+          {id, n.value("channel", 0u), static_cast<herm::module_id>(other),
+           n.value("link_kind", std::string{"?"}),
+           cost.empty() ? json(nullptr) : cost[0]});
       }
     } catch (const failure& f) {
       if (f.status == exit_unreachable)
         throw;
       std::cerr << "hermctl: " << herm::to_hex(id) << ": " << f.message << '\n';
-      names.emplace(id, "");
+      in.modules[id]; // drawn with its id only
     }
   }
+  auto g = make_topology(in);
   if (o.json_out) {
-    json j{{"nodes", json::array()}, {"edges", json::array()}};
-    for (auto& [id, name] : names)
-      j["nodes"].push_back({{"module", herm::to_hex(id)}, {"name", name}});
-    for (auto& [key, cost] : edges)
-      j["edges"].push_back({{"a", herm::to_hex(std::get<0>(key))},
-                            {"b", herm::to_hex(std::get<1>(key))},
-                            {"link_kind", std::get<2>(key)},
-                            {"cost", cost}});
-    print_json(std::cout, j);
+    print_json(std::cout, to_json(g));
     return exit_ok;
   }
-  std::ostringstream dot;
-  dot << "graph herm {\n  node [shape=box];\n";
-  for (auto& [id, name] : names) {
-    dot << "  \"" << herm::to_hex(id) << "\" [label=\"" << herm::to_hex(id);
-    if (!name.empty())
-      dot << "\\n" << dot_escape(name);
-    dot << "\"];\n";
-  }
-  for (auto& [key, cost] : edges)
-    dot << "  \"" << herm::to_hex(std::get<0>(key)) << "\" -- \""
-        << herm::to_hex(std::get<1>(key)) << "\" [label=\""
-        << dot_escape(std::get<2>(key)) << " " << cost_text(cost) << "\"];\n";
-  dot << "}\n";
-  auto graph = dot.str();
+  auto graph = to_dot(g);
   if (o.dot_file.empty() && o.svg_file.empty() && o.png_file.empty()) {
     std::cout << graph;
     return exit_ok;
   }
-  auto summary = " (" + std::to_string(names.size()) + " modules, "
-                 + std::to_string(edges.size()) + " links)";
+  auto summary = " (" + std::to_string(g.modules.size()) + " modules, "
+                 + std::to_string(g.links.size()) + " links"
+                 + (g.buses.empty() ? std::string{}
+                                    : ", " + std::to_string(g.buses.size())
+                                        + (g.buses.size() == 1 ? " bus" : " buses"))
+                 + ")";
   if (!o.dot_file.empty()) {
     std::ofstream out{o.dot_file};
     out << graph;

@@ -190,10 +190,24 @@ protected:
     auto path = dir_ + "/" + name + ".yaml";
     std::ofstream{path} << "module:\n  name: " << name << "\n  id: " << id
                         << "\n  hello_interval_ms: 100\ncontrol:\n  socket: "
-                           "off\nchannels:\n  - name: eth0\n    kind: udp\n"
+                        << sock(name)
+                        << "\nchannels:\n  - name: eth0\n    kind: udp\n"
                            "    interface: 127.0.0.1:"
                         << port << "\n    peers: 127.0.0.1:" << peer << "\n";
     return path;
+  }
+
+  std::string sock(const std::string& name) const {
+    return dir_ + "/" + name + ".sock";
+  }
+
+  /// hermctl's output for `args` on module `name`.
+  std::string hermctl(const std::string& name, const std::string& args) {
+    test::child_process p{{"/bin/sh", "-c", std::string{HERMCTL_BIN} + " -s "
+                                              + sock(name) + " " + args
+                                              + " 2>&1"}};
+    EXPECT_EQ(p.wait(30s), 0) << p.output();
+    return p.output();
   }
 
   std::string dir_;
@@ -219,6 +233,16 @@ TEST_F(hermd_change_log, logs_each_link_and_route_change_once) {
     ASSERT_TRUE(a.wait_for_line_containing(
       "route to 0x22: cost", 10s))
       << a.output();
+    // Neighbours and routes show b's link address as IP:port, not as the
+    // packed number.
+    auto peer = "127.0.0.1:" + std::to_string(pb);
+    auto neighbours = hermctl("a", "neighbors");
+    EXPECT_NE(neighbours.find("0x22    1        " + peer + "  Ethernet"),
+              std::string::npos)
+      << neighbours;
+    auto routes = hermctl("a", "routes");
+    EXPECT_NE(routes.find("0x22 (link " + peer + ")"), std::string::npos)
+      << routes;
     // Hellos go on; nothing more is logged about 0x22 while nothing changes.
     ASSERT_TRUE(b.wait_for_line_containing("link to 0x21 up", 10s))
       << b.output();
