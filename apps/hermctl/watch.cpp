@@ -10,6 +10,8 @@
 #include <set>
 #include <sstream>
 #include <thread>
+#include <tuple>
+#include <utility>
 
 namespace hermctl {
 
@@ -68,14 +70,7 @@ public:
   }
 
   void line(const std::string& text, bool highlight = false) {
-    auto t = clip(text, style_.width);
-    if (style_.ansi && highlight)
-      out_ << reverse_on << t << reverse_off;
-    else
-      out_ << t;
-    if (style_.ansi)
-      out_ << clear_line_rest;
-    out_ << '\n';
+    lines_.push_back({text, highlight});
   }
 
   /// A table; row i is highlighted when marks[i].
@@ -89,15 +84,40 @@ public:
       line(l, i > 0 && i - 1 < marks.size() && marks[i - 1]);
   }
 
+  /// The frame as text; on a terminal of `height` rows, the lines past
+  /// height - 1 are replaced by one that counts them.
   std::string finish() {
+    auto n = lines_.size();
+    if (style_.ansi && style_.height > 1 && n > style_.height - 1) {
+      auto cut = n - (style_.height - 2);
+      lines_.resize(style_.height - 2);
+      lines_.push_back({"... " + std::to_string(cut)
+                          + " more lines: a taller terminal shows them",
+                        true});
+    }
+    std::ostringstream out;
     if (style_.ansi)
-      return home + out_.str() + clear_screen_rest;
-    return out_.str() + "\n";
+      out << home;
+    for (auto& [text, highlight] : lines_) {
+      auto t = clip(text, style_.width);
+      if (style_.ansi && highlight)
+        out << reverse_on << t << reverse_off;
+      else
+        out << t;
+      if (style_.ansi)
+        out << clear_line_rest;
+      out << '\n';
+    }
+    if (style_.ansi)
+      out << clear_screen_rest;
+    else
+      out << '\n';
+    return out.str();
   }
 
 private:
   const frame_style& style_;
-  std::ostringstream out_;
+  std::vector<std::pair<std::string, bool>> lines_;
 };
 
 std::string rate(const watch_channel* before, const watch_channel& now,
@@ -414,11 +434,13 @@ std::string render_frame(const watch_snapshot* prev, const watch_snapshot& cur,
 
 namespace {
 
-size_t terminal_width(size_t fallback) {
+/// The terminal's columns and rows; `fallback` columns and no row limit
+/// when unknown.
+std::pair<size_t, size_t> terminal_size(size_t fallback) {
   winsize ws{};
   if (::ioctl(STDOUT_FILENO, TIOCGWINSZ, &ws) == 0 && ws.ws_col > 0)
-    return ws.ws_col;
-  return fallback;
+    return {ws.ws_col, ws.ws_row};
+  return {fallback, 0};
 }
 
 std::string wall_clock() {
@@ -519,7 +541,9 @@ void run_watch(const control_fn& call, const watch_options& o, std::ostream& out
       carry_gone(*prev, cur);
     frame_style style;
     style.ansi = o.ansi;
-    style.width = o.ansi ? terminal_width(o.width) : o.width;
+    style.width = o.width;
+    if (o.ansi)
+      std::tie(style.width, style.height) = terminal_size(o.width);
     style.number = n;
     style.interval_ms = static_cast<uint64_t>(o.interval.count());
     style.clock = wall_clock();

@@ -123,8 +123,12 @@ void carry_gone(const watch_snapshot& prev, watch_snapshot& cur);
 struct frame_style {
   /// Columns a line may use; 0: unlimited.
   size_t width = 0;
-  /// On a terminal: the frame starts at the top left of a cleared screen
-  /// and changed routes are in reverse video. Otherwise plain text, no
+  /// With `ansi`: rows of the terminal. A frame longer than height - 1
+  /// lines ends with a line that counts the rest. 0: unlimited.
+  size_t height = 0;
+  /// On a terminal: the frame is drawn over the previous one from the top
+  /// left, each line and the rest of the screen erased, and changed routes,
+  /// links down or dropping, and errors are in reverse video. Otherwise plain text, no
   /// escape codes, a blank line after each frame.
   bool ansi = false;
   /// Shown in the header: frame number, interval and wall-clock time.

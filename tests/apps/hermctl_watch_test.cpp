@@ -298,3 +298,20 @@ TEST(hermctl_watch, topics_show_the_rate_this_module_publishes_at) {
   EXPECT_NE(render_frame(nullptr, alpha(0), frame_style{}).find("topics\n(not available from"),
             std::string::npos);
 }
+
+TEST(hermctl_watch, a_frame_taller_than_the_terminal_ends_with_what_was_left_out) {
+  auto s = alpha(0);
+  for (uint32_t i = 0; i < 30; ++i)
+    s.routes.push_back({static_cast<herm::module_id>(0x100 + i), 10, 1, "0x31"});
+  frame_style style;
+  style.ansi = true;
+  style.height = 10;
+  auto frame = render_frame(nullptr, s, style);
+  EXPECT_EQ(count(frame, "\n"), 9u) << frame;
+  EXPECT_NE(frame.find("\x1b[7m... 36 more lines: a taller terminal shows them\x1b[0m"),
+            std::string::npos)
+    << frame;
+  // Off a terminal nothing is cut.
+  style.ansi = false;
+  EXPECT_NE(render_frame(nullptr, s, style).find("0x11D "), std::string::npos);
+}
