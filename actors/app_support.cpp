@@ -492,13 +492,41 @@ void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
 
 // -- topics --------------------------------------------------------------------------
 
-void deliver(asl_impl self, const topic_table::subscribers& subs,
-             const caf::message& msg) {
-  for (auto& sub : subs) {
+/// Gives a value of topic `t` to its local subscribers: `msg` to those that
+/// take messages (when this process could decode it), a topic_sample to
+/// those in sample mode.
+void deliver(asl_impl self, const std::string& name,
+             const topic_table::topic& t, module_id publisher, uint32_t seq,
+             const caf::message* msg, const byte_buffer& payload) {
+  auto& st = self->state;
+  if (msg != nullptr)
+    for (auto& sub : t.local_subs) {
+      post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
+           caf::make_message_id(), *msg);
+      ++st.stats.publications_delivered;
+    }
+  if (t.sample_subs.empty())
+    return;
+  auto sample = caf::make_message(topic_sample{
+    name, publisher, seq, caf::make_timestamp(), payload});
+  for (auto& sub : t.sample_subs) {
     post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
-         caf::make_message_id(), msg);
-    ++self->state.stats.publications_delivered;
+         caf::make_message_id(), sample);
+    ++st.stats.publications_delivered;
   }
+}
+
+/// Publishes `payload` (the marshalled `msg`; `msg` empty when this
+/// process cannot decode it) from this module.
+void publish_local(asl_impl self, const std::string& topic, caf::message msg,
+                   byte_buffer payload) {
+  auto& st = self->state;
+  auto typed = !msg.empty();
+  auto& t = st.topics->publish(topic, msg, std::move(payload),
+                               self->clock().now(), st.out);
+  flush(self);
+  deliver(self, topic, t, st.self_id, t.seq, typed ? &t.last : nullptr,
+          t.last_payload);
 }
 
 void on_publish_local(asl_impl self, const std::string& topic,
@@ -510,10 +538,33 @@ void on_publish_local(asl_impl self, const std::string& topic,
     ++st.stats.tx_refused;
     return;
   }
-  auto& subs = st.topics->publish(topic, msg, std::move(*payload),
-                                 self->clock().now(), st.out);
-  flush(self);
-  deliver(self, subs, msg);
+  publish_local(self, topic, msg, std::move(*payload));
+}
+
+/// A value marshalled elsewhere (hermctl): published as it is.
+caf::error on_publish_raw(asl_impl self, const std::string& topic,
+                          byte_buffer& payload) {
+  auto& st = self->state;
+  if (auto err = asl_error::check_label("a topic", topic))
+    return err;
+  if (payload.empty() || payload[0] != apo_format_version)
+    return make_error(ec::invalid_parameter, "not an APO payload of version 1");
+  if (payload.size() > st.cfg.max_message) {
+    ++st.stats.tx_refused;
+    return make_error(ec::packet_too_large,
+                      std::to_string(payload.size()) + " bytes, above "
+                        + std::to_string(st.cfg.max_message));
+  }
+  // Decoded only for local subscribers that take messages; a type this
+  // process lacks still reaches the others.
+  caf::message msg;
+  auto* t = st.topics->find(topic);
+  if (t != nullptr && !t->local_subs.empty())
+    if (auto m = unmarshal(self->system(), payload.data(), payload.size(),
+                           st.cfg.limits))
+      msg = std::move(*m);
+  publish_local(self, topic, std::move(msg), std::move(payload));
+  return {};
 }
 
 // -- the network ---------------------------------------------------------------------
@@ -560,9 +611,14 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
       } else if constexpr (std::is_same_v<T, asl_advertise>) {
         st.topics->on_advertise(src, x, now, st.out);
       } else if constexpr (std::is_same_v<T, asl_publish>) {
-        if (auto subs = st.topics->on_publish(src, x))
-          if (auto value = unmarshal_counted(self, x.payload))
-            deliver(self, *subs, *value);
+        if (auto t = st.topics->on_publish(src, x)) {
+          caf::expected<caf::message> value{caf::message{}};
+          if (!t->local_subs.empty())
+            value = unmarshal_counted(self, x.payload);
+          deliver(self, x.topic, *t, src, x.seq,
+                  value && !t->local_subs.empty() ? &*value : nullptr,
+                  x.payload);
+        }
       }
     },
     *msg);
@@ -820,10 +876,40 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
         return caf::unit;
       self->monitor(sub);
       flush(self);
-      if (t->has_last)
+      if (t->has_last && !t->last.empty())
         post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
              caf::make_message_id(), t->last);
       return caf::unit;
+    },
+    [self](atom::subscribe, std::string& topic, caf::actor& sub,
+           atom::sample) -> caf::result<void> {
+      auto& st = self->state;
+      if (auto err = asl_error::check_label("a topic", topic))
+        return err;
+      if (!sub)
+        return make_error(ec::invalid_parameter, "invalid actor handle");
+      auto t = st.topics->subscribe(topic, sub, self->clock().now(), st.out,
+                                    true);
+      if (t == nullptr)
+        return caf::unit;
+      self->monitor(sub);
+      flush(self);
+      if (t->has_last && t->publishing)
+        post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
+             caf::make_message_id(),
+             caf::make_message(topic_sample{topic, st.self_id, t->seq,
+                                            caf::make_timestamp(),
+                                            t->last_payload}));
+      return caf::unit;
+    },
+    [self](atom::publish, std::string& topic,
+           byte_buffer& payload) -> caf::result<void> {
+      if (auto err = on_publish_raw(self, topic, payload))
+        return err;
+      return caf::unit;
+    },
+    [self](atom::get, atom::topics) -> std::vector<topic_info> {
+      return self->state.topics->list();
     },
     [self](atom::unsubscribe, std::string& topic, caf::actor& sub) {
       self->state.topics->unsubscribe(sub.address(), &topic, self->state.out);

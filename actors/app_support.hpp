@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "caf/fwd.hpp"
+#include "caf/timestamp.hpp"
 #include "caf/replies_to.hpp"
 #include "caf/typed_actor.hpp"
 
@@ -132,6 +133,49 @@ template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, apo_info& x) {
   return f(caf::meta::type_name("apo_info"), x.ref, x.local, x.watchers,
            x.age_ms);
+}
+
+/// One value of a topic as this module received (or published) it: what a
+/// subscriber in sample mode receives (tools such as hermctl's echo and
+/// record, and typed subscribers that want the publisher and the time).
+struct topic_sample {
+  std::string topic;
+  /// The module that published it.
+  module_id publisher = no_module;
+  /// Its sequence number at the publisher (counts from 1).
+  uint32_t seq = 0;
+  /// When this module received it (or published it, when local).
+  caf::timestamp time;
+  /// The message, marshalled (docs/protocol.md, "APO payloads").
+  byte_buffer payload;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, topic_sample& x) {
+  return f(caf::meta::type_name("topic_sample"), x.topic, x.publisher, x.seq,
+           x.time, x.payload);
+}
+
+/// One topic as one module sees it (hermctl topic list).
+struct topic_info {
+  std::string topic;
+  /// This module publishes it; `seq`: its last sequence number.
+  bool publishing = false;
+  uint32_t seq = 0;
+  /// Local actors subscribed (either kind).
+  uint32_t local_subscribers = 0;
+  /// Publisher side: modules holding a lease.
+  std::vector<module_id> remote_subscribers;
+  /// Subscriber side: modules heard publishing it.
+  std::vector<module_id> publishers;
+  /// The type of the first element of the last value seen ("" if none).
+  std::string type;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, topic_info& x) {
+  return f(caf::meta::type_name("topic_info"), x.topic, x.publishing, x.seq,
+           x.local_subscribers, x.remote_subscribers, x.publishers, x.type);
 }
 
 /// Counters of one application support actor. Everything dropped is counted
@@ -267,6 +311,18 @@ using app_support_actor = caf::typed_actor<
   /// as the message that was published. Ends when it exits or unsubscribes.
   caf::replies_to<atom::subscribe, std::string, caf::actor>::with<void>,
   caf::reacts_to<atom::unsubscribe, std::string, caf::actor>,
+  /// Subscribes `subscriber` in sample mode: it receives every value as a
+  /// topic_sample (payload, publisher, sequence number, time), also values
+  /// of types this process was not built with.
+  caf::replies_to<atom::subscribe, std::string, caf::actor,
+                  atom::sample>::with<void>,
+  /// Publishes a value already marshalled (hermctl's topic pub and play).
+  /// Local subscribers get it as a message when this process knows its
+  /// types. Errors: ec::invalid_parameter (topic, not an APO payload),
+  /// ec::packet_too_large (over max_message).
+  caf::replies_to<atom::publish, std::string, byte_buffer>::with<void>,
+  /// The topics this module publishes or subscribes to.
+  caf::replies_to<atom::get, atom::topics>::with<std::vector<topic_info>>,
   caf::replies_to<atom::get, atom::stats>::with<app_support_stats>,
   // -- internal: the network, proxies, the reply sink, timers ---------------------
   caf::reacts_to<packet_delivered>, caf::reacts_to<reachability>,

@@ -5,6 +5,8 @@
 // docs/protocol.md ("Control requests").
 
 #include "actors/control.hpp"
+#include "actors/control_topics.hpp"
+#include "actors/text_form.hpp"
 #include "actors/control_json.hpp"
 
 #include <algorithm>
@@ -13,6 +15,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 
 #include "caf/actor_cast.hpp"
 #include "caf/actor_system.hpp"
@@ -522,6 +525,198 @@ void cmd_ping(control_impl self, const json& req, ms timeout, reply_promise rp) 
                });
 }
 
+// -- topics and calls (actors/control_topics.hpp) ------------------------------------------
+
+/// This module's topics, or with "all": true every module's, merged: the
+/// modules are those whose control service answers a discovery.
+void cmd_topics(control_impl self, const json& req, ms timeout,
+                reply_promise rp) {
+  auto& apps = self->state.m.apps;
+  auto ai = req.find("all");
+  if (ai == req.end() || !ai->is_boolean() || !ai->get<bool>()) {
+    self->request(apps, timeout, atom::get_v, atom::topics_v)
+      .then(
+        [rp](std::vector<topic_info>& rows) mutable {
+          rp.deliver(ok_reply(control_topics::topics_json(rows)));
+        },
+        fail_with(rp));
+    return;
+  }
+  with_self_id(self, timeout, rp, [=](routing_stats& rs) {
+    apo_query q{query_by::name, control_apo_name, discovery_ms, false};
+    self->request(apps, timeout + ms(discovery_ms), atom::find_v, std::move(q))
+      .then(
+        [=](std::vector<apo_ref>& found) {
+          auto rows = std::make_shared<std::vector<json>>();
+          auto unanswered = std::make_shared<json>(json::array());
+          auto join = std::make_shared<join_counter>();
+          std::set<module_id> modules{rs.self};
+          for (auto& ref : found)
+            if (ref.type == control_apo_type)
+              modules.insert(ref.module);
+          join->pending = modules.size();
+          join->done = [rp, rows, unanswered]() mutable {
+            rp.deliver(ok_reply({{"topics", control_topics::merge_topics(*rows)},
+                                 {"modules", rows->size()},
+                                 {"unanswered", *unanswered}}));
+          };
+          for (auto m : modules)
+            resolve(self, m, rs.self, timeout,
+                    [=](caf::expected<caf::actor> dest) {
+                      if (!dest) {
+                        unanswered->push_back(to_hex(m));
+                        join->finish_one();
+                        return;
+                      }
+                      self->request(*dest, timeout,
+                                    std::string{R"({"cmd":"topics"})"})
+                        .then(
+                          [=](std::string& text) {
+                            auto j = json::parse(text, nullptr, false);
+                            if (!j.is_discarded() && j.value("ok", false))
+                              rows->push_back(
+                                {{"module", to_hex(m)}, {"topics", j["result"]}});
+                            else
+                              unanswered->push_back(to_hex(m));
+                            join->finish_one();
+                          },
+                          [=](caf::error&) {
+                            self->state.proxies.erase(m);
+                            unanswered->push_back(to_hex(m));
+                            join->finish_one();
+                          });
+                    });
+        },
+        fail_with(rp));
+  });
+}
+
+/// Publishes a value given in the text form ("value", "type") or as a
+/// marshalled payload in hex ("payload": what hermctl play sends).
+void cmd_publish(control_impl self, const json& req, ms timeout,
+                 reply_promise rp) {
+  auto topic = string_field(req, "topic");
+  std::string why;
+  byte_buffer payload;
+  if (req.count("payload") > 0) {
+    auto bytes = from_hex_bytes(string_field(req, "payload"));
+    if (bytes)
+      payload = std::move(*bytes);
+    else
+      why = "\"payload\": " + render(bytes.error());
+  } else {
+    payload = control_topics::payload_of(req, why);
+  }
+  if (!why.empty()) {
+    rp.deliver(error_reply("invalid_parameter", why));
+    return;
+  }
+  auto size = payload.size();
+  auto type = first_type_name(payload.data(), payload.size());
+  self->request(self->state.m.apps, timeout, atom::publish_v, topic,
+                std::move(payload))
+    .then(
+      [rp, topic, size, type]() mutable {
+        rp.deliver(ok_reply({{"topic", topic}, {"type", type}, {"bytes", size}}));
+      },
+      fail_with(rp));
+}
+
+/// Sends the local APO `ref` the request of `req` and relays its reply.
+void call_local(control_impl self, const json& req, apo_ref ref, ms timeout,
+                reply_promise rp) {
+  std::string why;
+  auto payload = control_topics::payload_of(req, why);
+  if (!why.empty()) {
+    rp.deliver(error_reply("invalid_parameter", why));
+    return;
+  }
+  auto msg = unmarshal(self->system(), payload.data(), payload.size());
+  if (!msg) {
+    rp.deliver(error_reply(msg.error()));
+    return;
+  }
+  self->request(self->state.m.apps, timeout, atom::bind_v, ref)
+    .then(
+      [=](caf::actor& apo) mutable {
+        auto helper = control_topics::spawn_call(self->system());
+        self
+          ->request(helper, timeout + ms(1000), apo, ref, *msg,
+                    static_cast<uint32_t>(timeout.count()))
+          .then([rp](std::string& reply) mutable { rp.deliver(reply); },
+                fail_with(rp));
+      },
+      fail_with(rp));
+}
+
+/// A request to the APO named "apo", wherever it runs: a local one is
+/// called here; a remote one through its module's control service (whose
+/// process knows the request's types).
+void cmd_call(control_impl self, const json& req, ms timeout,
+              reply_promise rp) {
+  auto name = string_field(req, "apo");
+  if (name.empty() || name.size() > 255) {
+    rp.deliver(error_reply("invalid_parameter",
+                           "\"apo\" must name an APO (1 to 255 bytes)"));
+    return;
+  }
+  with_self_id(self, timeout, rp, [=](routing_stats& rs) {
+    apo_query q{query_by::name, name, discovery_ms, true};
+    self
+      ->request(self->state.m.apps, timeout + ms(discovery_ms), atom::find_v,
+                std::move(q))
+      .then(
+        [=](std::vector<apo_ref>& found) mutable {
+          if (found.empty()) {
+            rp.deliver(error_reply(make_error(
+              app_ec::not_found, "no APO named '" + name + "' answered")));
+            return;
+          }
+          // A local match first.
+          auto ref = found.front();
+          for (auto& r : found)
+            if (r.module == rs.self)
+              ref = r;
+          if (ref.module == rs.self) {
+            call_local(self, req, ref, timeout, rp);
+            return;
+          }
+          auto rest = req;
+          rest.erase("module");
+          forward(self, ref.module, rs.self, dump(rest), timeout, rp, false);
+        },
+        fail_with(rp));
+  });
+}
+
+/// A stream of values of topics, written by `writer` (control_actor).
+void open_stream(control_impl self, const std::string& text,
+                 caf::actor writer,
+                 caf::typed_response_promise<std::string> rp) {
+  auto req = json::parse(text, nullptr, false);
+  std::string why;
+  control_topics::stream_options opts;
+  if (req.is_discarded() || !req.is_object())
+    why = "a request is one JSON object with a \"cmd\"";
+  else if (req.count("module") > 0)
+    why = "a stream runs on the local module (topics reach it from every "
+          "module)";
+  else
+    opts = control_topics::parse_stream(req, why);
+  if (!why.empty()) {
+    rp.deliver(error_reply("invalid_parameter", why));
+    return;
+  }
+  with_self_id(self, default_control_timeout, rp,
+               [self, rp, writer, opts](routing_stats& rs) mutable {
+                 control_topics::spawn_stream(
+                   self->system(), self->state.m.apps,
+                   caf::actor_cast<control_actor>(self), rs.self, writer, opts);
+                 rp.deliver(ok_reply({{"topics", opts.topics},
+                                      {"module", to_hex(rs.self)}}));
+               });
+}
+
 /// Answers one request (docs/protocol.md, "Control requests").
 void dispatch(control_impl self, const std::string& text, reply_promise rp) {
   auto req = json::parse(text, nullptr, false);
@@ -590,6 +785,18 @@ void dispatch(control_impl self, const std::string& text, reply_promise rp) {
     cmd_link(self, req, timeout, rp);
   else if (cmd == "ping")
     cmd_ping(self, req, timeout, rp);
+  else if (cmd == "topics")
+    cmd_topics(self, req, timeout, rp);
+  else if (cmd == "publish")
+    cmd_publish(self, req, timeout, rp);
+  else if (cmd == "call")
+    cmd_call(self, req, timeout, rp);
+  else if (cmd == "types")
+    rp.deliver(ok_reply(control_topics::descriptions_json(req["names"])));
+  else if (cmd == "subscribe")
+    rp.deliver(error_reply("invalid_request",
+                           "\"subscribe\" opens a stream: send it on the "
+                           "control socket"));
   else
     rp.deliver(error_reply("unknown_command", "unknown command '" + cmd + "'"));
 }
@@ -618,6 +825,12 @@ control_actor::behavior_type control_fun(control_impl self, module_handles m,
         // nlohmann's accessors throw on odd shapes we failed to check.
         rp.deliver(error_reply("invalid_request", e.what()));
       }
+      return rp;
+    },
+    [self](atom::subscribe, std::string& text,
+           caf::actor& writer) -> caf::result<std::string> {
+      auto rp = self->make_response_promise<std::string>();
+      open_stream(self, text, writer, rp);
       return rp;
     },
   };

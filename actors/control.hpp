@@ -38,8 +38,15 @@ std::chrono::milliseconds control_deadline(const std::string& request);
 /// One request (a JSON object with at least "cmd") in, one reply out:
 /// {"ok": true, "result": ...} or {"ok": false, "error": {"code": "no_route",
 /// "message": "..."}}. Never fails at the CAF level.
+///
+/// A stream ({"cmd": "subscribe", "topics": [...]}, the control socket's
+/// topic echo and record) comes with the actor that writes its lines: the
+/// service sends it one std::string per value until it ends, and replies
+/// the stream's first line.
 using control_actor
-  = caf::typed_actor<caf::replies_to<std::string>::with<std::string>>;
+  = caf::typed_actor<caf::replies_to<std::string>::with<std::string>,
+                     caf::replies_to<atom::subscribe, std::string,
+                                     caf::actor>::with<std::string>>;
 
 /// Spawns the control service of module `m` (named `module_name` in
 /// replies) and registers it in the module's application table.

@@ -25,6 +25,7 @@
 #include <atomic>
 #include <cerrno>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <future>
 #include <list>
@@ -64,6 +65,10 @@ constexpr std::chrono::seconds line_deadline{10};
 
 /// Clients served at once; one more gets a "busy" reply and is closed.
 constexpr size_t max_clients = 16;
+
+/// Lines a stream (topic echo, record) holds for a client that reads slowly;
+/// more are dropped, and the client hears how many in a {"dropped": N} line.
+constexpr size_t max_stream_lines = 4096;
 
 /// After a line over max_line, the rest of it is read and dropped (so that
 /// the client, still writing, is not reset before it reads its error reply)
@@ -279,6 +284,11 @@ private:
           line.pop_back();
         if (line.find_first_not_of(" \t") == std::string::npos)
           continue;
+        if (is_stream(line)) {
+          // The connection is the stream's until either side ends it.
+          stream(fd, line);
+          return;
+        }
         if (!write_all(fd, answer(line) + '\n',
                        clock_type::now() + std::chrono::seconds(5)))
           return;
@@ -350,6 +360,93 @@ private:
     }
   }
 
+  /// A request that opens a stream: {"cmd": "subscribe", ...}.
+  static bool is_stream(const std::string& line) {
+    auto req = json::parse(line, nullptr, false);
+    return req.is_object() && req.value("cmd", json{}) == "subscribe"
+           && req.count("module") == 0;
+  }
+
+  /// Lines from the service's stream, for one client thread.
+  struct stream_queue {
+    std::mutex mtx;
+    std::deque<std::string> lines;
+    uint64_t dropped = 0;
+    int event_fd = -1;
+  };
+
+  /// Serves a stream: its first line is the service's reply; then one line
+  /// per value until the client closes, the stream ends or we stop.
+  void stream(int fd, const std::string& line) {
+    auto q = std::make_shared<stream_queue>();
+    fd_guard efd{::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)};
+    if (efd.fd < 0) {
+      write_all(fd, error_reply("unavailable", "cannot open a stream: "
+                                                 + errno_text(errno)) + '\n',
+                clock_type::now() + std::chrono::seconds(1));
+      return;
+    }
+    q->event_fd = efd.fd;
+    auto writer = sys_.spawn([q](caf::event_based_actor*) -> caf::behavior {
+      return {
+        [q](std::string& text) {
+          {
+            std::lock_guard<std::mutex> guard{q->mtx};
+            if (q->lines.size() >= max_stream_lines) {
+              ++q->dropped;
+              return;
+            }
+            q->lines.push_back(std::move(text));
+          }
+          uint64_t one = 1;
+          [[maybe_unused]] auto r = ::write(q->event_fd, &one, sizeof(one));
+        },
+      };
+    });
+    auto first = ask_service(line, writer);
+    auto j = json::parse(first, nullptr, false);
+    auto ok = !j.is_discarded() && j.value("ok", false);
+    if (!write_all(fd, first + '\n', clock_type::now() + std::chrono::seconds(5))
+        || !ok) {
+      caf::anon_send_exit(writer, caf::exit_reason::user_shutdown);
+      return;
+    }
+    for (;;) {
+      pollfd p[3] = {{fd, POLLIN, 0}, {efd.fd, POLLIN, 0}, {stop_read_, POLLIN, 0}};
+      auto n = ::poll(p, 3, -1);
+      if (n < 0 && errno == EINTR)
+        continue;
+      if (n < 0 || p[2].revents != 0)
+        break;
+      if (p[0].revents != 0) {
+        // Anything from the client is ignored; its end ends the stream.
+        char chunk[512];
+        auto r = ::recv(fd, chunk, sizeof(chunk), MSG_DONTWAIT);
+        if (r == 0 || (r < 0 && errno != EINTR && errno != EAGAIN))
+          break;
+      }
+      if (p[1].revents == 0)
+        continue;
+      uint64_t count = 0;
+      [[maybe_unused]] auto r = ::read(efd.fd, &count, sizeof(count));
+      std::deque<std::string> lines;
+      uint64_t dropped = 0;
+      {
+        std::lock_guard<std::mutex> guard{q->mtx};
+        lines.swap(q->lines);
+        std::swap(dropped, q->dropped);
+      }
+      std::string out;
+      if (dropped > 0)
+        out = control_json::dump(json{{"dropped", dropped}}) + '\n';
+      for (auto& l : lines)
+        out += l + '\n';
+      if (!write_all(fd, out, clock_type::now() + std::chrono::seconds(5)))
+        break;
+    }
+    caf::anon_send_exit(writer, caf::exit_reason::user_shutdown);
+  }
+
   /// The server's own counters, for the "stats" reply.
   json counters() const {
     return {{"clients", clients_.load()},
@@ -395,22 +492,27 @@ private:
   /// Asks the service through a helper actor and waits for its answer
   /// here, watching the stop pipe: stopping the server ends the helper and
   /// does not wait for a slow request.
-  std::string ask_service(const std::string& line) {
+  std::string ask_service(const std::string& line, caf::actor writer = {}) {
     auto result = std::make_shared<std::promise<std::string>>();
     auto answer = result->get_future();
-    auto helper = sys_.spawn([service = service_, line, result,
+    auto helper = sys_.spawn([service = service_, line, result, writer,
                               deadline = control_deadline(line)](
                                caf::event_based_actor* self) {
-      self->request(service, deadline, line)
-        .then([result](std::string& r) { result->set_value(std::move(r)); },
-              [result](caf::error& err) {
-                auto timed_out
-                  = err == caf::make_error(caf::sec::request_timeout);
-                result->set_value(error_reply(
-                  timed_out ? "timeout" : "unavailable",
-                  timed_out ? "the control service did not answer in time"
-                            : "control service: " + render(err)));
-              });
+      auto on_reply = [result](std::string& r) {
+        result->set_value(std::move(r));
+      };
+      auto on_error = [result](caf::error& err) {
+        auto timed_out = err == caf::make_error(caf::sec::request_timeout);
+        result->set_value(error_reply(
+          timed_out ? "timeout" : "unavailable",
+          timed_out ? "the control service did not answer in time"
+                    : "control service: " + render(err)));
+      };
+      if (writer)
+        self->request(service, deadline, atom::subscribe_v, line, writer)
+          .then(on_reply, on_error);
+      else
+        self->request(service, deadline, line).then(on_reply, on_error);
     });
     while (answer.wait_for(std::chrono::milliseconds(0))
            != std::future_status::ready) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "actors/app_support.hpp"
+#include "actors/text_form.hpp"
 
 namespace herm {
 
@@ -41,7 +42,7 @@ void topic_table::send_last(const std::string& name, const topic& t,
 
 // -- this module's publishers and subscribers ---------------------------------
 
-const topic_table::subscribers&
+const topic_table::topic&
 topic_table::publish(const std::string& name, caf::message msg,
                      byte_buffer payload, time_point now, asl_outbox& out) {
   auto& t = topics_[name];
@@ -55,22 +56,25 @@ topic_table::publish(const std::string& name, caf::message msg,
   t.has_last = true;
   t.last = std::move(msg);
   t.last_payload = std::move(payload);
+  t.last_type = first_type_name(t.last_payload.data(), t.last_payload.size());
   expire_leases(t.remote_subs, now);
   for (auto& kv : t.remote_subs)
     send_last(name, t, kv.first, out);
-  return t.local_subs;
+  return t;
 }
 
 const topic_table::topic* topic_table::subscribe(const std::string& name,
                                                  const caf::actor& sub,
                                                  time_point now,
-                                                 asl_outbox& out) {
+                                                 asl_outbox& out,
+                                                 bool samples) {
   auto& t = topics_[name];
-  if (std::find(t.local_subs.begin(), t.local_subs.end(), sub)
-      != t.local_subs.end())
+  auto& subs = samples ? t.sample_subs : t.local_subs;
+  if (std::find(subs.begin(), subs.end(), sub) != subs.end())
     return nullptr;
-  t.local_subs.push_back(sub);
-  if (t.local_subs.size() == 1)
+  auto first = !t.interested();
+  subs.push_back(sub);
+  if (first)
     announce(name, t, broadcast_module, now, out);
   return &t;
 }
@@ -80,19 +84,19 @@ void topic_table::unsubscribe(const caf::actor_addr& who,
   for (auto i = topics_.begin(); i != topics_.end();) {
     auto& t = i->second;
     if (only == nullptr || i->first == *only) {
-      auto before = t.local_subs.size();
-      t.local_subs.erase(std::remove_if(t.local_subs.begin(),
-                                        t.local_subs.end(),
-                                        [&](const caf::actor& a) {
-                                          return a.address() == who;
-                                        }),
-                         t.local_subs.end());
-      if (before > 0 && t.local_subs.empty()) {
+      auto before = t.interested();
+      for (auto* subs : {&t.local_subs, &t.sample_subs})
+        subs->erase(std::remove_if(subs->begin(), subs->end(),
+                                   [&](const caf::actor& a) {
+                                     return a.address() == who;
+                                   }),
+                    subs->end());
+      if (before && !t.interested()) {
         out.push(broadcast_module, asl_unsubscribe{i->first});
         t.last_seq.clear();
       }
     }
-    if (t.local_subs.empty() && !t.publishing)
+    if (!t.interested() && !t.publishing)
       i = topics_.erase(i);
     else
       ++i;
@@ -126,15 +130,15 @@ void topic_table::on_unsubscribe(module_id src, const asl_unsubscribe& u) {
 void topic_table::on_advertise(module_id src, const asl_advertise& a,
                                time_point now, asl_outbox& out) {
   if (auto i = topics_.find(a.topic);
-      i != topics_.end() && !i->second.local_subs.empty())
+      i != topics_.end() && i->second.interested())
     announce(a.topic, i->second, src, now, out);
 }
 
-const topic_table::subscribers* topic_table::on_publish(module_id src,
-                                                        const asl_publish& p) {
+const topic_table::topic* topic_table::on_publish(module_id src,
+                                                  const asl_publish& p) {
   ++stats_->publications_received;
   auto i = topics_.find(p.topic);
-  if (i == topics_.end() || i->second.local_subs.empty())
+  if (i == topics_.end() || !i->second.interested())
     return nullptr; // no longer interested; the lease runs out
   auto& t = i->second;
   auto last = t.last_seq.find(src);
@@ -150,7 +154,27 @@ const topic_table::subscribers* topic_table::on_publish(module_id src,
     // Delivered, but its gaps and repeats go unnoticed.
     ++stats_->publishers_refused;
   }
-  return &t.local_subs;
+  t.last_type = first_type_name(p.payload.data(), p.payload.size());
+  return &t;
+}
+
+std::vector<topic_info> topic_table::list() const {
+  std::vector<topic_info> rows;
+  for (auto& [name, t] : topics_) {
+    topic_info row;
+    row.topic = name;
+    row.publishing = t.publishing;
+    row.local_subscribers
+      = static_cast<uint32_t>(t.local_subs.size() + t.sample_subs.size());
+    for (auto& kv : t.remote_subs)
+      row.remote_subscribers.push_back(kv.first);
+    for (auto& kv : t.last_seq)
+      row.publishers.push_back(kv.first);
+    row.type = t.last_type;
+    row.seq = t.seq;
+    rows.push_back(std::move(row));
+  }
+  return rows;
 }
 
 void topic_table::module_lost(module_id m) {
@@ -162,7 +186,7 @@ void topic_table::module_lost(module_id m) {
 
 void topic_table::housekeep(time_point now, asl_outbox& out) {
   for (auto& [name, t] : topics_) {
-    if (!t.local_subs.empty() && t.next_refresh <= now)
+    if (t.interested() && t.next_refresh <= now)
       announce(name, t, broadcast_module, now, out);
     expire_leases(t.remote_subs, now);
   }

@@ -34,6 +34,7 @@
 namespace herm {
 
 struct app_support_stats;
+struct topic_info;
 
 class topic_table {
 public:
@@ -45,7 +46,11 @@ public:
 
   struct topic {
     // -- subscriber side --
+    /// Local subscribers given each value as the message published.
     subscribers local_subs;
+    /// Local subscribers given each value as a topic_sample (its payload,
+    /// publisher, sequence number and time): tools and typed subscribers.
+    subscribers sample_subs;
     time_point next_refresh;
     /// Last sequence number per publishing module.
     std::map<module_id, uint32_t> last_seq;
@@ -57,6 +62,13 @@ public:
     byte_buffer last_payload;
     /// Subscribed modules and when their lease ends.
     std::map<module_id, time_point> remote_subs;
+    /// The type name of the first element of the last value seen.
+    std::string last_type;
+
+    /// Some local actor subscribed.
+    bool interested() const {
+      return !local_subs.empty() || !sample_subs.empty();
+    }
   };
 
   /// `lease`: how long this module's subscriptions last (renewed at a
@@ -71,24 +83,26 @@ public:
 
   // -- this module's publishers and subscribers -------------------------------
 
-  /// Publishes `msg` (marshalled: `payload`) at `now`: the next sequence
+  /// Publishes `msg` (marshalled: `payload`; an empty `msg` when this
+  /// process cannot decode the payload) at `now`: the next sequence
   /// number, kept as the last value; an advertisement when this module did
   /// not publish the topic before, and a publication to every subscribed
-  /// module whose lease holds (the others are dropped). Returns the local
-  /// subscribers to give `msg` to.
-  const subscribers& publish(const std::string& name, caf::message msg,
-                             byte_buffer payload, time_point now,
-                             asl_outbox& out);
+  /// module whose lease holds (the others are dropped). Returns the topic,
+  /// whose local subscribers are to be given the value.
+  const topic& publish(const std::string& name, caf::message msg,
+                       byte_buffer payload, time_point now, asl_outbox& out);
 
-  /// Adds local subscriber `sub` at `now`: nullptr if it subscribed
-  /// already, else the topic (give `sub` its last value if it has one).
-  /// The first local subscriber's subscription is broadcast.
+  /// Adds local subscriber `sub` at `now`, given values as messages or,
+  /// with `samples`, as topic_sample: nullptr if it subscribed so already,
+  /// else the topic (give `sub` its last value if it has one). The first
+  /// local subscriber's subscription is broadcast.
   const topic* subscribe(const std::string& name, const caf::actor& sub,
-                         time_point now, asl_outbox& out);
+                         time_point now, asl_outbox& out,
+                         bool samples = false);
 
-  /// Removes local subscriber `who` from topic `*only`, or from every topic
-  /// when `only` is nullptr. A topic that loses its last local subscriber
-  /// is unsubscribed from on the network.
+  /// Removes local subscriber `who` (of either kind) from topic `*only`, or
+  /// from every topic when `only` is nullptr. A topic that loses its last
+  /// local subscriber is unsubscribed from on the network.
   void unsubscribe(const caf::actor_addr& who, const std::string* only,
                    asl_outbox& out);
 
@@ -106,11 +120,16 @@ public:
   void on_advertise(module_id src, const asl_advertise& a, time_point now,
                     asl_outbox& out);
 
-  /// A publication from module `src`: the local subscribers to give it to
-  /// (once unmarshalled), or nullptr (none, or the same value again). Gaps
-  /// count as lost publications; past max_peers publishing modules, a new
-  /// one's value is delivered untracked (counted).
-  const subscribers* on_publish(module_id src, const asl_publish& p);
+  /// A publication from module `src`: the topic whose local subscribers to
+  /// give it to, or nullptr (none, or the same value again). Gaps count as
+  /// lost publications; past max_peers publishing modules, a new one's
+  /// value is delivered untracked (counted).
+  const topic* on_publish(module_id src, const asl_publish& p);
+
+  /// Every topic this module publishes or subscribes to, by name: whether
+  /// it publishes, its local subscribers, the modules subscribed to it and
+  /// those heard publishing it, and the type last seen. O(t p).
+  std::vector<topic_info> list() const;
 
   /// Module `m` is gone: forget its leases and sequence numbers.
   void module_lost(module_id m);

@@ -13,6 +13,8 @@ HERM_ATOM(find);
 HERM_ATOM(forward);
 HERM_ATOM(publish);
 HERM_ATOM(reply);
+HERM_ATOM(sample);
+HERM_ATOM(topics);
 HERM_ATOM(unregister);
 
 } // namespace herm::atom

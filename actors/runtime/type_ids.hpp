@@ -25,6 +25,10 @@ CAF_BEGIN_TYPE_ID_BLOCK(herm_asl, caf::id_block::herm_routing::end)
   CAF_ADD_TYPE_ID(herm_asl, (herm::app_support_stats))
   CAF_ADD_TYPE_ID(herm_asl, (herm::app_support_actor))
   CAF_ADD_TYPE_ID(herm_asl, (herm::apo_access))
+  CAF_ADD_TYPE_ID(herm_asl, (std::vector<uint8_t>))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::topic_sample))
+  CAF_ADD_TYPE_ID(herm_asl, (herm::topic_info))
+  CAF_ADD_TYPE_ID(herm_asl, (std::vector<herm::topic_info>))
 
 CAF_END_TYPE_ID_BLOCK(herm_asl)
 

@@ -39,6 +39,7 @@
 #include "apps/hermctl/graphviz.hpp"
 #include "apps/hermctl/topology.hpp"
 #include "apps/hermctl/local_modules.hpp"
+#include "apps/hermctl/topics.hpp"
 #include "apps/hermctl/views.hpp"
 #include "apps/hermctl/watch.hpp"
 #include "channels/link_profile.hpp"
@@ -526,6 +527,7 @@ int main(int argc, char** argv) {
                     "seconds between frames (default 1)")
     ->check(CLI::Range(0.1, 3600.0));
   watch->add_option("--count", o.frames, "stop after N frames (default: never)");
+  hermctl::topic_commands topic_cmds{app};
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -537,6 +539,8 @@ int main(int argc, char** argv) {
       return cmd_profiles(o);
     if (cost->parsed())
       return cmd_cost(o);
+    if (topic_cmds.parsed() && !topic_cmds.needs_module())
+      return topic_cmds.run({}, o.timeout_ms, o.json_out);
     auto module = herm::no_module;
     if (!o.module.empty()) {
       if (ping->parsed() || trace->parsed() || topology->parsed())
@@ -575,6 +579,13 @@ int main(int argc, char** argv) {
           std::cerr << using_line(pick.chosen) << '\n';
       }
     }
+    if (topic_cmds.parsed()) {
+      if (module != herm::no_module)
+        throw failure{exit_usage, "--module does not apply to topic, call, "
+                                  "record and play: topics and APOs of every "
+                                  "module reach the local one"};
+      return topic_cmds.run(path, o.timeout_ms, o.json_out);
+    }
     client c{path, o.timeout_ms};
     if (info->parsed())
       return show(c, o, module, {{"cmd", "info"}}, show_info);
@@ -610,6 +621,10 @@ int main(int argc, char** argv) {
       return cmd_watch(c, o, module);
     return exit_usage;
   } catch (const failure& f) {
+    std::cout.flush();
+    std::cerr << "hermctl: " << f.message << '\n';
+    return f.status;
+  } catch (const hermctl::topic_failure& f) {
     std::cout.flush();
     std::cerr << "hermctl: " << f.message << '\n';
     return f.status;

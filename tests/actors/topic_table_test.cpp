@@ -193,8 +193,8 @@ TEST_F(topic_table_test, sequence_numbers_drop_repeats_and_count_gaps) {
     auto subs = tt.on_publish(r.src, asl_publish{"t", r.seq, {}});
     EXPECT_EQ(subs != nullptr, r.delivered);
     if (subs != nullptr) {
-      ASSERT_EQ(subs->size(), 1u);
-      EXPECT_EQ(subs->front(), s);
+      ASSERT_EQ(subs->local_subs.size(), 1u);
+      EXPECT_EQ(subs->local_subs.front(), s);
     }
     EXPECT_EQ(stats.publications_lost, r.lost);
   }
@@ -216,6 +216,52 @@ TEST_F(topic_table_test, publishers_tracked_per_topic_stay_within_the_bound) {
   EXPECT_NE(tt.on_publish(c, asl_publish{"t", 1, {}}), nullptr);
   EXPECT_EQ(tt.on_publish(c, asl_publish{"t", 1, {}}), nullptr);
   EXPECT_EQ(stats.publishers_refused, 2u);
+}
+
+// -- sample subscribers and the list ---------------------------------------------------
+
+TEST_F(topic_table_test, a_sample_subscriber_subscribes_once_with_a_typed_one) {
+  topic_table tt{8, 3s, stats};
+  auto typed = subscriber();
+  auto tool = subscriber();
+  ASSERT_NE(tt.subscribe("t", tool, t0, out, true), nullptr);
+  EXPECT_EQ(drain(out), (rows{{broadcast_module, "subscribe", "t", 3000}}));
+  // Already subscribed in that mode: nullptr; the other mode joins quietly.
+  EXPECT_EQ(tt.subscribe("t", tool, t0, out, true), nullptr);
+  ASSERT_NE(tt.subscribe("t", typed, t0, out), nullptr);
+  EXPECT_TRUE(drain(out).empty());
+  auto t = tt.on_publish(a, asl_publish{"t", 1, {}});
+  ASSERT_NE(t, nullptr);
+  EXPECT_EQ(t->local_subs, topic_table::subscribers{typed});
+  EXPECT_EQ(t->sample_subs, topic_table::subscribers{tool});
+  // The network subscription ends with the last subscriber of either kind.
+  tt.unsubscribe(typed.address(), nullptr, out);
+  EXPECT_TRUE(drain(out).empty());
+  tt.unsubscribe(tool.address(), nullptr, out);
+  EXPECT_EQ(drain(out), (rows{{broadcast_module, "unsubscribe", "t", 0}}));
+  EXPECT_EQ(tt.find("t"), nullptr);
+}
+
+TEST_F(topic_table_test, the_list_shows_both_sides_and_the_last_type) {
+  topic_table tt{8, 3s, stats};
+  // 01 01 04 "@u16" 07 00: one @u16.
+  byte_buffer u16{0x01, 0x01, 0x04, '@', 'u', '1', '6', 0x07, 0x00};
+  tt.publish("out", caf::make_message(uint16_t{7}), u16, t0, out);
+  tt.on_subscribe(b, lease("out", 3000), t0, out);
+  tt.subscribe("in", subscriber(), t0, out, true);
+  tt.on_publish(c, asl_publish{"in", 4, {0x01, 0x01, 0x04, '@', 's', 't', 'r', 0x00}});
+  auto rows_ = tt.list();
+  ASSERT_EQ(rows_.size(), 2u);
+  EXPECT_EQ(rows_[0].topic, "in");
+  EXPECT_FALSE(rows_[0].publishing);
+  EXPECT_EQ(rows_[0].local_subscribers, 1u);
+  EXPECT_EQ(rows_[0].publishers, std::vector<module_id>{c});
+  EXPECT_EQ(rows_[0].type, "@str");
+  EXPECT_EQ(rows_[1].topic, "out");
+  EXPECT_TRUE(rows_[1].publishing);
+  EXPECT_EQ(rows_[1].seq, 1u);
+  EXPECT_EQ(rows_[1].remote_subscribers, std::vector<module_id>{b});
+  EXPECT_EQ(rows_[1].type, "@u16");
 }
 
 } // namespace

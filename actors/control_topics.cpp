@@ -1,0 +1,378 @@
+#include "actors/control_topics.hpp"
+
+#include <deque>
+#include <map>
+#include <set>
+
+#include "caf/actor_system.hpp"
+#include "caf/blocking_actor.hpp"
+#include "caf/event_based_actor.hpp"
+#include "caf/others.hpp"
+#include "caf/stateful_actor.hpp"
+
+#include "actors/control_json.hpp"
+#include "actors/marshal.hpp"
+#include "actors/runtime/error.hpp"
+#include "actors/text_form.hpp"
+#include "actors/type_description.hpp"
+
+namespace herm::control_topics {
+
+namespace {
+
+using namespace control_json;
+using ms = std::chrono::milliseconds;
+
+/// Most topics one session follows.
+constexpr size_t max_stream_topics = 64;
+
+/// How long a session waits for another module's descriptions.
+constexpr ms describe_timeout{3000};
+
+/// Most type names one "types" request asks for.
+constexpr size_t max_type_names = 64;
+
+/// The error's sentence (its context), else its rendering.
+std::string sentence(const caf::error& err) {
+  if (err.context().match_elements<std::string>())
+    return err.context().get_as<std::string>(0);
+  return render(err);
+}
+
+json description_json(const type_description& d) {
+  json fields = json::array();
+  for (auto& f : d.fields)
+    fields.push_back({{"name", f.name}, {"type", f.type}});
+  return {{"name", d.name}, {"fields", fields}};
+}
+
+// -- stream sessions -----------------------------------------------------------
+
+struct stream_state {
+  static inline const char* name = "herm.control.stream";
+
+  caf::actor writer;
+  control_actor control;
+  module_id self_id = no_module;
+  stream_options opts;
+  /// Types whose description went out in a line already (raw mode).
+  std::set<std::string> described;
+  /// (module, type) pairs asked for already.
+  std::set<std::pair<module_id, std::string>> asked;
+  /// Values waiting while a description is asked for.
+  std::deque<topic_sample> backlog;
+  bool waiting = false;
+  uint64_t dropped = 0;
+};
+
+using stream_actor = caf::stateful_actor<stream_state>;
+
+/// Renders `s` and sends its line; false (nothing sent) when it first needs
+/// descriptions from its publisher, which are then asked for.
+bool emit(stream_actor* self, const topic_sample& s) {
+  auto& st = self->state;
+  auto text = payload_to_text(s.payload.data(), s.payload.size());
+  if (text && !text->undescribed.empty() && s.publisher != st.self_id) {
+    json missing = json::array();
+    for (auto& t : text->undescribed)
+      if (st.asked.emplace(s.publisher, t).second)
+        missing.push_back(t);
+    if (!missing.empty()) {
+      st.waiting = true;
+      json req{{"cmd", "types"},
+               {"names", missing},
+               {"module", to_hex(s.publisher)},
+               {"timeout_ms", describe_timeout.count()}};
+      auto done = [self] {
+        self->state.waiting = false;
+        auto& backlog = self->state.backlog;
+        while (!backlog.empty() && !self->state.waiting) {
+          auto next = std::move(backlog.front());
+          backlog.pop_front();
+          if (!emit(self, next)) {
+            backlog.push_front(std::move(next));
+            break;
+          }
+        }
+      };
+      self->request(st.control, 2 * describe_timeout, dump(req))
+        .then(
+          [done](std::string& reply) {
+            auto j = json::parse(reply, nullptr, false);
+            if (!j.is_discarded() && j.value("ok", false))
+              learn_descriptions(j["result"]);
+            done();
+          },
+          [done](caf::error&) { done(); });
+      return false;
+    }
+  }
+  // Ordered, so that a struct's fields keep their order.
+  ordered_json line;
+  line["topic"] = s.topic;
+  line["publisher"] = to_hex(s.publisher);
+  line["seq"] = s.seq;
+  line["time_ns"] = s.time.time_since_epoch().count();
+  if (text) {
+    line["types"] = text->types;
+    line["value"] = std::move(text->value);
+    if (!text->undescribed.empty())
+      line["undescribed"] = text->undescribed;
+  } else {
+    line["error"] = sentence(text.error());
+  }
+  if (st.opts.raw) {
+    line["payload"] = to_hex_bytes(s.payload.data(), s.payload.size());
+    auto descs = ordered_json::array();
+    if (text)
+      for (auto& t : text->types)
+        if (st.described.insert(t).second)
+          if (auto d = find_description(t))
+            descs.push_back(ordered_json::parse(description_json(*d).dump()));
+    if (!descs.empty())
+      line["descriptions"] = descs;
+  }
+  if (st.dropped > 0) {
+    line["dropped"] = st.dropped;
+    st.dropped = 0;
+  }
+  self->send(st.writer,
+             line.dump(-1, ' ', false, json::error_handler_t::replace));
+  return true;
+}
+
+caf::behavior stream_fun(stream_actor* self, app_support_actor apps,
+                         control_actor control, module_id self_id,
+                         caf::actor writer, stream_options opts) {
+  auto& st = self->state;
+  st.writer = writer;
+  st.control = std::move(control);
+  st.self_id = self_id;
+  st.opts = std::move(opts);
+  self->monitor(writer);
+  self->set_down_handler([self](caf::down_msg&) { self->quit(); });
+  for (auto& t : st.opts.topics)
+    self->request(apps, std::chrono::seconds(10), atom::subscribe_v, t,
+                  caf::actor_cast<caf::actor>(self), atom::sample_v)
+      .then([] {},
+            [self](caf::error& err) {
+              self->send(self->state.writer,
+                         dump(json{{"error", render(err)}}));
+              self->quit();
+            });
+  return {
+    [self](topic_sample& s) {
+      auto& st = self->state;
+      if (st.waiting) {
+        if (st.backlog.size() < max_backlog)
+          st.backlog.push_back(std::move(s));
+        else
+          ++st.dropped;
+        return;
+      }
+      if (!emit(self, s))
+        st.backlog.push_front(std::move(s));
+    },
+  };
+}
+
+// -- calls ---------------------------------------------------------------------
+
+void call_fun(caf::blocking_actor* self) {
+  self->receive([self](caf::actor& apo, apo_ref& ref, caf::message& request,
+                       uint32_t timeout_ms) -> std::string {
+    std::string reply;
+    auto describe = [&](const caf::message& msg) {
+      ordered_json result;
+      result["apo"] = ref.name;
+      result["module"] = to_hex(ref.module);
+      result["type"] = ref.type;
+      auto payload = marshal(self->system(), msg);
+      if (!payload) {
+        result["types"] = ordered_json::array();
+        result["value"] = nullptr;
+        result["error"] = sentence(payload.error());
+      } else if (auto text = payload_to_text(payload->data(), payload->size())) {
+        result["types"] = text->types;
+        result["value"] = std::move(text->value);
+        if (!text->undescribed.empty())
+          result["undescribed"] = text->undescribed;
+      } else {
+        return error_reply(text.error());
+      }
+      ordered_json reply;
+      reply["ok"] = true;
+      reply["result"] = std::move(result);
+      return reply.dump(-1, ' ', false, json::error_handler_t::replace);
+    };
+    self->request(apo, ms(timeout_ms), std::move(request))
+      .receive([&](caf::error& err) { reply = error_reply(err); },
+               caf::others >> [&](caf::message_view& x)
+                                -> caf::result<caf::message> {
+                 reply = describe(x.move_content_to_message());
+                 return caf::message{};
+               });
+    return reply;
+  });
+}
+
+} // namespace
+
+stream_options parse_stream(const json& req, std::string& why) {
+  stream_options opts;
+  auto ti = req.find("topics");
+  if (ti == req.end() || !ti->is_array() || ti->empty()
+      || ti->size() > max_stream_topics) {
+    why = "\"topics\" must be an array of 1 to "
+          + std::to_string(max_stream_topics) + " topic names";
+    return opts;
+  }
+  for (auto& t : *ti) {
+    if (!t.is_string() || t.get<std::string>().empty()
+        || t.get<std::string>().size() > 255) {
+      why = "a topic name is a string of 1 to 255 bytes, got " + dump(t);
+      return opts;
+    }
+    opts.topics.push_back(t.get<std::string>());
+  }
+  auto ri = req.find("raw");
+  opts.raw = ri != req.end() && ri->is_boolean() && ri->get<bool>();
+  return opts;
+}
+
+caf::actor spawn_stream(caf::actor_system& sys, app_support_actor apps,
+                        control_actor control, module_id self_id,
+                        caf::actor writer, stream_options opts) {
+  return sys.spawn(stream_fun, std::move(apps), std::move(control), self_id,
+                   std::move(writer), std::move(opts));
+}
+
+caf::actor spawn_call(caf::actor_system& sys) {
+  return sys.spawn<caf::detached>(call_fun);
+}
+
+byte_buffer payload_of(const json& req, std::string& why) {
+  auto vi = req.find("value");
+  if (vi == req.end()) {
+    why = "a \"value\" is needed (the text form: a JSON value)";
+    return {};
+  }
+  auto value = ordered_json::parse(vi->dump());
+  std::vector<std::string> types;
+  auto type = string_field(req, "type");
+  for (size_t start = 0; !type.empty() && start <= type.size();) {
+    // A comma inside <...> belongs to the type (map<K,V>).
+    auto depth = 0;
+    size_t end = start;
+    for (; end < type.size(); ++end) {
+      if (type[end] == '<')
+        ++depth;
+      else if (type[end] == '>')
+        --depth;
+      else if (type[end] == ',' && depth == 0)
+        break;
+    }
+    types.push_back(type.substr(start, end - start));
+    start = end + 1;
+  }
+  if (types.empty()) {
+    auto t = default_type(value);
+    if (t.empty()) {
+      why = "give the value's \"type\" (it cannot be told from "
+            + vi->dump() + ")";
+      return {};
+    }
+    types.push_back(t);
+  }
+  auto payload = text_to_payload(value, types);
+  if (!payload) {
+    why = sentence(payload.error());
+    return {};
+  }
+  return std::move(*payload);
+}
+
+json descriptions_json(const json& names) {
+  json out = json::array();
+  if (!names.is_array())
+    return out;
+  size_t n = 0;
+  for (auto& name : names) {
+    if (!name.is_string() || ++n > max_type_names)
+      break;
+    if (auto d = find_description(name.get<std::string>()))
+      out.push_back(description_json(*d));
+  }
+  return out;
+}
+
+void learn_descriptions(const json& result) {
+  if (!result.is_array())
+    return;
+  size_t n = 0;
+  for (auto& d : result) {
+    if (++n > max_type_names || !d.is_object())
+      return;
+    type_description desc;
+    desc.name = string_field(d, "name");
+    auto fi = d.find("fields");
+    if (desc.name.empty() || fi == d.end() || !fi->is_array())
+      continue;
+    for (auto& f : *fi)
+      if (f.is_object())
+        desc.fields.push_back({string_field(f, "name"), string_field(f, "type")});
+    learn_description(desc);
+  }
+}
+
+json topics_json(const std::vector<topic_info>& rows) {
+  json out = json::array();
+  for (auto& r : rows) {
+    json subs = json::array(), pubs = json::array();
+    for (auto m : r.remote_subscribers)
+      subs.push_back(to_hex(m));
+    for (auto m : r.publishers)
+      pubs.push_back(to_hex(m));
+    out.push_back({{"topic", r.topic},
+                   {"publishing", r.publishing},
+                   {"seq", r.seq},
+                   {"local_subscribers", r.local_subscribers},
+                   {"remote_subscribers", subs},
+                   {"publishers", pubs},
+                   {"type", r.type}});
+  }
+  return out;
+}
+
+json merge_topics(const std::vector<json>& per_module) {
+  struct row {
+    std::set<std::string> publishers, subscribers;
+    std::string type;
+  };
+  std::map<std::string, row> rows;
+  for (auto& m : per_module) {
+    auto module = m.value("module", std::string{});
+    auto& topics = m["topics"];
+    if (!topics.is_array())
+      continue;
+    for (auto& t : topics) {
+      auto& r = rows[t.value("topic", std::string{})];
+      if (t.value("publishing", false))
+        r.publishers.insert(module);
+      if (t.value("local_subscribers", 0) > 0)
+        r.subscribers.insert(module);
+      auto type = t.value("type", std::string{});
+      if (!type.empty())
+        r.type = type;
+    }
+  }
+  json out = json::array();
+  for (auto& [name, r] : rows)
+    out.push_back({{"topic", name},
+                   {"type", r.type},
+                   {"publishers", r.publishers},
+                   {"subscribers", r.subscribers}});
+  return out;
+}
+
+} // namespace herm::control_topics

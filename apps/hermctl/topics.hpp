@@ -1,0 +1,66 @@
+#pragma once
+
+// hermctl's everyday verbs for data: topic list, echo, hz and pub, call,
+// record and play (docs/user-guide.md, "Tools"). They speak to one
+// module's control socket: topics reach it from every module, and a call
+// finds its APO anywhere. Values print and parse in the text form
+// (actors/text_form.hpp).
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+namespace hermctl {
+
+/// Ends a topic command: `message` to stderr, `status` the exit status
+/// (hermctl's: 1 failed, 2 usage, 3 no module).
+struct topic_failure {
+  int status;
+  std::string message;
+};
+
+class topic_commands {
+public:
+  /// Adds the subcommands to `app`.
+  explicit topic_commands(CLI::App& app);
+
+  /// True if one of them was given.
+  bool parsed() const;
+
+  /// False for the one that needs no module (record --info).
+  bool needs_module() const;
+
+  /// Runs the one given against the control socket at `path`; returns the
+  /// exit status or throws topic_failure.
+  int run(const std::string& path, uint32_t timeout_ms, bool json_out);
+
+private:
+  CLI::App* topic_ = nullptr;
+  CLI::App* list_ = nullptr;
+  CLI::App* echo_ = nullptr;
+  CLI::App* hz_ = nullptr;
+  CLI::App* pub_ = nullptr;
+  CLI::App* call_ = nullptr;
+  CLI::App* record_ = nullptr;
+  CLI::App* play_ = nullptr;
+
+  std::string topic;
+  std::string value;
+  std::string type;
+  std::string apo;
+  uint64_t count = 0;
+  uint64_t window = 10000;
+  double rate = 0;
+  bool raw = false;
+  std::string output;
+  std::vector<std::string> topics;
+  std::string info_file;
+  double duration_s = 0;
+  std::string file;
+  double play_rate = 1.0;
+  bool loop = false;
+};
+
+} // namespace hermctl
