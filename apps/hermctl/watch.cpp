@@ -349,12 +349,13 @@ std::string render_frame(const watch_snapshot* prev, const watch_snapshot& cur,
                      : 0;
   rows.clear();
   marks.clear();
+  std::map<std::pair<uint64_t, std::string>, const watch_channel*> earlier;
+  if (prev != nullptr)
+    for (auto& p : prev->channels)
+      earlier[{p.id, p.device}] = &p;
   for (auto& c : cur.channels) {
-    const watch_channel* before = nullptr;
-    if (prev != nullptr)
-      for (auto& p : prev->channels)
-        if (p.id == c.id && p.device == c.device)
-          before = &p;
+    auto found = earlier.find({c.id, c.device});
+    const watch_channel* before = found == earlier.end() ? nullptr : found->second;
     std::string drops = "-";
     if (c.has_stats) {
       drops = std::to_string(c.drops);
@@ -401,16 +402,21 @@ std::string render_frame(const watch_snapshot* prev, const watch_snapshot& cur,
   }
   f.line("topics (" + std::to_string(cur.topics->size()) + ")");
   rows.clear();
+  // The sequence numbers of the topics the module published last time.
+  std::map<std::string, uint32_t> published;
+  if (prev != nullptr && prev->topics)
+    for (auto& t : *prev->topics)
+      if (t.publishing)
+        published[t.topic] = t.seq;
   for (auto& t : *cur.topics) {
     std::string pub_rate = "-";
-    if (t.publishing && prev != nullptr && prev->topics && seconds > 0)
-      for (auto& p : *prev->topics)
-        if (p.topic == t.topic && p.publishing) {
-          char buf[32];
-          auto per_s = static_cast<double>(static_cast<uint32_t>(t.seq - p.seq)) / seconds;
-          std::snprintf(buf, sizeof(buf), per_s < 100 ? "%.1f" : "%.0f", per_s);
-          pub_rate = buf;
-        }
+    auto p = published.find(t.topic);
+    if (t.publishing && p != published.end() && seconds > 0) {
+      char buf[32];
+      auto per_s = static_cast<double>(static_cast<uint32_t>(t.seq - p->second)) / seconds;
+      std::snprintf(buf, sizeof(buf), per_s < 100 ? "%.1f" : "%.0f", per_s);
+      pub_rate = buf;
+    }
     std::string pubs;
     for (auto& m : t.publishers)
       pubs += (pubs.empty() ? "" : ",") + m;
