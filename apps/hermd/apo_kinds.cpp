@@ -20,6 +20,10 @@
 #include "apps/hermd/testbed_types.hpp"
 #include "routing/module_id.hpp"
 
+#ifdef HERM_HAVE_DDS_GATEWAY
+#  include "apps/dds_gateway/gateway.hpp"
+#endif
+
 namespace herm::hermd {
 
 namespace {
@@ -535,6 +539,25 @@ std::vector<apo_kind> make_kinds() {
                       const apo_config&) -> caf::expected<caf::actor> {
                      return ctx.sys->spawn(echo);
                    }});
+#ifdef HERM_HAVE_DDS_GATEWAY
+  // The DDS / ROS 2 gateway (apps/dds_gateway, docs/gateway.md).
+  kinds.push_back(
+    {"dds_gateway",
+     "joins HERM topics and DDS / ROS 2 topics (options: domain, "
+     "<topic>.type, <topic>.direction, ...; docs/gateway.md)",
+     [](const apo_config& cfg) -> caf::error {
+       auto o = dds_gateway::parse_gateway_options(cfg.options);
+       return o ? caf::error{} : o.error();
+     },
+     [](const apo_context& ctx,
+        const apo_config& cfg) -> caf::expected<caf::actor> {
+       auto o = dds_gateway::parse_gateway_options(cfg.options);
+       if (!o)
+         return o.error();
+       return dds_gateway::spawn_dds_gateway(*ctx.sys, ctx.module,
+                                             std::move(*o));
+     }});
+#endif
   return kinds;
 }
 
@@ -554,6 +577,9 @@ const apo_kind* find_apo_kind(const std::string& name) {
 
 void add_apo_types(caf::actor_system_config& cfg) {
   cfg.add_message_types<caf::id_block::herm_apos>();
+#ifdef HERM_HAVE_DDS_GATEWAY
+  dds_gateway::add_gateway_types(cfg);
+#endif
 }
 
 } // namespace herm::hermd

@@ -1,0 +1,183 @@
+#include "apps/dds_gateway/gateway_config.hpp"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+
+#include "actors/runtime/error.hpp"
+
+namespace herm::dds_gateway {
+
+namespace {
+
+caf::error fail(const std::string& key, const std::string& what) {
+  return make_error(ec::invalid_config, "options." + key + ": " + what);
+}
+
+caf::error integer(const std::string& key, const std::string& text,
+                   uint64_t min, uint64_t max, uint64_t& out) {
+  char* end = nullptr;
+  errno = 0;
+  auto v = std::strtoull(text.c_str(), &end, 10);
+  if (text.empty() || text[0] == '-' || *end != '\0' || errno != 0 || v < min
+      || v > max)
+    return fail(key, "expected an integer in [" + std::to_string(min) + ", "
+                       + std::to_string(max) + "], got '" + text + "'");
+  out = v;
+  return caf::none;
+}
+
+caf::error number(const std::string& key, const std::string& text, float min,
+                  float max, float& out) {
+  char* end = nullptr;
+  auto v = std::strtof(text.c_str(), &end);
+  if (text.empty() || *end != '\0' || !std::isfinite(v) || v < min || v > max)
+    return fail(key, "expected a number in [" + std::to_string(min) + ", "
+                       + std::to_string(max) + "], got '" + text + "'");
+  out = v;
+  return caf::none;
+}
+
+std::string known_types() {
+  std::string out;
+  for (auto& t : ros_types())
+    out += (out.empty() ? "" : ", ") + std::string{t.name};
+  return out;
+}
+
+constexpr uint64_t max_domain = 232; // DDSI's port mapping allows 0..232
+
+/// One `<topic>.<field>` option into `m`.
+caf::error field(mapping& m, const std::string& key, const std::string& f,
+                 const std::string& v) {
+  if (f == "type") {
+    m.type = find_ros_type(v);
+    if (m.type == nullptr)
+      return fail(key, "expected a shipped ROS type (" + known_types()
+                         + "), got '" + v + "'");
+  } else if (f == "direction") {
+    if (v == "to_dds")
+      m.dir = direction::to_dds;
+    else if (v == "from_dds")
+      m.dir = direction::from_dds;
+    else if (v == "both")
+      m.dir = direction::both;
+    else
+      return fail(key, "expected to_dds, from_dds or both, got '" + v + "'");
+  } else if (f == "dds_topic") {
+    if (v.empty() || v.size() > 255)
+      return fail(key, "expected a DDS topic name of 1 to 255 bytes");
+    m.dds_topic = v;
+  } else if (f == "domain") {
+    uint64_t d = 0;
+    if (auto err = integer(key, v, 0, max_domain, d))
+      return err;
+    m.domain = static_cast<uint32_t>(d);
+  } else if (f == "reliability") {
+    if (v != "reliable" && v != "best_effort")
+      return fail(key, "expected reliable or best_effort, got '" + v + "'");
+    m.reliable = v == "reliable";
+  } else if (f == "depth") {
+    uint64_t d = 0;
+    if (auto err = integer(key, v, 1, 10000, d))
+      return err;
+    m.depth = static_cast<int32_t>(d);
+  } else if (f == "durability") {
+    if (v != "volatile" && v != "transient_local")
+      return fail(key, "expected volatile or transient_local, got '" + v + "'");
+    m.transient_local = v == "transient_local";
+  } else if (f == "frame_id") {
+    if (v.size() > 255)
+      return fail(key, "expected a frame id of at most 255 bytes");
+    m.conv.frame_id = v;
+  } else if (f == "field_of_view") {
+    return number(key, v, 0, 6.2832f, m.conv.field_of_view);
+  } else if (f == "min_range") {
+    return number(key, v, 0, 65.534f, m.conv.min_range);
+  } else if (f == "max_range") {
+    return number(key, v, 0, 65.534f, m.conv.max_range);
+  } else {
+    return fail(key, "unknown field '" + f
+                       + "' (expected type, direction, dds_topic, domain, "
+                         "reliability, depth, durability, frame_id, "
+                         "field_of_view, min_range, max_range)");
+  }
+  return caf::none;
+}
+
+bool is_range(const mapping& m) {
+  return m.type != nullptr && std::string{m.type->name} == "sensor_msgs/msg/Range";
+}
+
+} // namespace
+
+caf::expected<gateway_config>
+parse_gateway_options(const std::map<std::string, std::string>& options) {
+  gateway_config cfg;
+  uint64_t domain = 0;
+  uint64_t max_string = 4096;
+  uint64_t backlog = cfg.max_backlog;
+  // Gateway-wide options first: every mapping starts from them.
+  for (auto& [key, v] : options) {
+    if (key.find('.') != std::string::npos)
+      continue;
+    caf::error err;
+    if (key == "domain")
+      err = integer(key, v, 0, max_domain, domain);
+    else if (key == "max_string")
+      err = integer(key, v, 1, 60000, max_string);
+    else if (key == "max_backlog")
+      err = integer(key, v, 1, 1000000, backlog);
+    else
+      err = fail(key, "unknown option (expected domain, max_string, "
+                      "max_backlog or <topic>.<field>)");
+    if (err)
+      return err;
+  }
+  cfg.max_backlog = static_cast<uint32_t>(backlog);
+  // Then one mapping per topic, fields in key order (std::map).
+  std::map<std::string, mapping> by_topic;
+  std::map<std::string, std::vector<std::string>> range_fields;
+  for (auto& [key, v] : options) {
+    auto dot = key.rfind('.');
+    if (dot == std::string::npos)
+      continue;
+    auto topic = key.substr(0, dot);
+    auto f = key.substr(dot + 1);
+    if (topic.empty() || topic.size() > 255)
+      return fail(key, "expected a HERM topic of 1 to 255 bytes before '."
+                         + f + "'");
+    auto i = by_topic.find(topic);
+    if (i == by_topic.end()) {
+      if (by_topic.size() >= max_mappings)
+        return fail(key, "more than " + std::to_string(max_mappings)
+                           + " mappings");
+      mapping m;
+      m.herm_topic = topic;
+      m.dds_topic = "rt/" + topic;
+      m.domain = static_cast<uint32_t>(domain);
+      m.conv.max_string = max_string;
+      m.conv.frame_id = topic;
+      i = by_topic.emplace(topic, std::move(m)).first;
+    }
+    if (auto err = field(i->second, key, f, v))
+      return err;
+    if (f == "frame_id" || f == "field_of_view" || f == "min_range"
+        || f == "max_range")
+      range_fields[topic].push_back(key);
+  }
+  for (auto& [topic, m] : by_topic) {
+    if (m.type == nullptr)
+      return fail(topic + ".type", "missing: every mapping needs its ROS type ("
+                                     + known_types() + ")");
+    if (!is_range(m) && range_fields.count(topic) > 0)
+      return fail(range_fields[topic].front(),
+                  "only a sensor_msgs/msg/Range mapping takes this field");
+    if (m.conv.min_range > m.conv.max_range)
+      return fail(topic + ".min_range", "is above max_range");
+    cfg.mappings.push_back(std::move(m));
+  }
+  return cfg;
+}
+
+} // namespace herm::dds_gateway

@@ -1,0 +1,134 @@
+// A gateway's options as hermd reads them: ROS 2's defaults, every field,
+// and errors that name the option.
+
+#include <gtest/gtest.h>
+
+#include "actors/runtime/error.hpp"
+#include "apps/dds_gateway/gateway_config.hpp"
+
+using namespace herm::dds_gateway;
+using options = std::map<std::string, std::string>;
+
+namespace {
+
+/// The error's text ("" when it parsed).
+std::string error_of(const options& o) {
+  auto cfg = parse_gateway_options(o);
+  if (cfg)
+    return "";
+  EXPECT_EQ(cfg.error(), herm::ec::invalid_config);
+  return herm::render(cfg.error());
+}
+
+} // namespace
+
+TEST(gateway_config, a_mapping_needs_only_its_type_and_gets_ros2_defaults) {
+  auto cfg = parse_gateway_options({{"sonar.type", "sensor_msgs/msg/Range"}});
+  ASSERT_TRUE(cfg) << herm::render(cfg.error());
+  ASSERT_EQ(cfg->mappings.size(), 1u);
+  auto& m = cfg->mappings[0];
+  EXPECT_EQ(m.herm_topic, "sonar");
+  EXPECT_EQ(m.dds_topic, "rt/sonar");
+  EXPECT_STREQ(m.type->name, "sensor_msgs/msg/Range");
+  EXPECT_EQ(m.dir, direction::to_dds);
+  EXPECT_EQ(m.domain, 0u);
+  EXPECT_TRUE(m.reliable);
+  EXPECT_EQ(m.depth, 10);
+  EXPECT_FALSE(m.transient_local);
+  EXPECT_EQ(m.conv.frame_id, "sonar");
+  EXPECT_EQ(m.conv.max_string, 4096u);
+  EXPECT_EQ(cfg->max_backlog, 1024u);
+}
+
+TEST(gateway_config, every_field_is_read_and_the_gateway_domain_is_the_default) {
+  auto cfg = parse_gateway_options({
+    {"domain", "42"},
+    {"max_string", "100"},
+    {"max_backlog", "8"},
+    {"robot.cmd_vel.type", "geometry_msgs/msg/Twist"},
+    {"robot.cmd_vel.direction", "from_dds"},
+    {"robot.cmd_vel.dds_topic", "rt/robot1/cmd_vel"},
+    {"robot.cmd_vel.reliability", "best_effort"},
+    {"robot.cmd_vel.depth", "1"},
+    {"robot.cmd_vel.durability", "transient_local"},
+    {"chat.type", "std_msgs/msg/String"},
+    {"chat.direction", "both"},
+    {"chat.domain", "7"},
+    {"sonar.type", "sensor_msgs/msg/Range"},
+    {"sonar.frame_id", "front"},
+    {"sonar.field_of_view", "0.3"},
+    {"sonar.min_range", "0.05"},
+    {"sonar.max_range", "2.5"},
+  });
+  ASSERT_TRUE(cfg) << herm::render(cfg.error());
+  ASSERT_EQ(cfg->mappings.size(), 3u);
+  EXPECT_EQ(cfg->max_backlog, 8u);
+  // In topic order.
+  auto& chat = cfg->mappings[0];
+  EXPECT_EQ(chat.herm_topic, "chat");
+  EXPECT_EQ(chat.dir, direction::both);
+  EXPECT_TRUE(chat.to_dds() && chat.from_dds());
+  EXPECT_EQ(chat.domain, 7u);
+  EXPECT_EQ(chat.conv.max_string, 100u);
+  auto& cmd = cfg->mappings[1];
+  EXPECT_EQ(cmd.herm_topic, "robot.cmd_vel");
+  EXPECT_EQ(cmd.dds_topic, "rt/robot1/cmd_vel");
+  EXPECT_EQ(cmd.dir, direction::from_dds);
+  EXPECT_FALSE(cmd.to_dds());
+  EXPECT_EQ(cmd.domain, 42u);
+  EXPECT_FALSE(cmd.reliable);
+  EXPECT_EQ(cmd.depth, 1);
+  EXPECT_TRUE(cmd.transient_local);
+  auto& sonar = cfg->mappings[2];
+  EXPECT_EQ(sonar.conv.frame_id, "front");
+  EXPECT_FLOAT_EQ(sonar.conv.field_of_view, 0.3f);
+  EXPECT_FLOAT_EQ(sonar.conv.min_range, 0.05f);
+  EXPECT_FLOAT_EQ(sonar.conv.max_range, 2.5f);
+}
+
+TEST(gateway_config, errors_name_the_option_and_what_was_expected) {
+  struct {
+    options opts;
+    const char* text;
+  } cases[] = {
+    {{{"sonar.direction", "to_dds"}},
+     "options.sonar.type: missing: every mapping needs its ROS type"},
+    {{{"sonar.type", "sensor_msgs/Range"}},
+     "options.sonar.type: expected a shipped ROS type (std_msgs/msg/String"},
+    {{{"sonar.type", "sensor_msgs/msg/Range"}, {"sonar.direction", "up"}},
+     "options.sonar.direction: expected to_dds, from_dds or both, got 'up'"},
+    {{{"sonar.type", "sensor_msgs/msg/Range"}, {"sonar.depth", "0"}},
+     "options.sonar.depth: expected an integer in [1, 10000], got '0'"},
+    {{{"sonar.type", "sensor_msgs/msg/Range"}, {"sonar.reliability", "maybe"}},
+     "options.sonar.reliability: expected reliable or best_effort"},
+    {{{"sonar.type", "sensor_msgs/msg/Range"}, {"sonar.durability", "forever"}},
+     "options.sonar.durability: expected volatile or transient_local"},
+    {{{"sonar.type", "sensor_msgs/msg/Range"}, {"sonar.colour", "red"}},
+     "options.sonar.colour: unknown field 'colour'"},
+    {{{"domain", "233"}},
+     "options.domain: expected an integer in [0, 232], got '233'"},
+    {{{"speed", "1"}}, "options.speed: unknown option"},
+    {{{"x.type", "std_msgs/msg/Int32"}, {"x.frame_id", "f"}},
+     "options.x.frame_id: only a sensor_msgs/msg/Range mapping takes this field"},
+    {{{"s.type", "sensor_msgs/msg/Range"}, {"s.min_range", "NaN"}},
+     "options.s.min_range: expected a number"},
+    {{{"s.type", "sensor_msgs/msg/Range"}, {"s.min_range", "3"},
+      {"s.max_range", "2"}},
+     "options.s.min_range: is above max_range"},
+    {{{".type", "std_msgs/msg/Int32"}}, "options..type: expected a HERM topic"},
+  };
+  for (auto& c : cases) {
+    auto text = error_of(c.opts);
+    EXPECT_NE(text.find(c.text), std::string::npos)
+      << "expected '" << c.text << "' in '" << text << "'";
+  }
+}
+
+TEST(gateway_config, mappings_are_bounded) {
+  options o;
+  for (size_t i = 0; i <= max_mappings; ++i)
+    o["t" + std::to_string(i) + ".type"] = "std_msgs/msg/Int32";
+  EXPECT_NE(error_of(o).find("more than 256 mappings"), std::string::npos);
+  o.erase("t0.type");
+  EXPECT_EQ(error_of(o), "");
+}

@@ -1,0 +1,232 @@
+// The gateway in one process with a real module and a real DDS participant
+// of the test's own: values cross once each way on a `both` mapping and
+// never loop back through the gateway; HERM values of the wrong type are
+// dropped and counted. Bounded waits; nothing asserts on timing.
+
+#include <gtest/gtest.h>
+
+#include <stdlib.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <functional>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "caf/actor_system.hpp"
+#include "caf/actor_system_config.hpp"
+#include "caf/event_based_actor.hpp"
+#include "caf/scoped_actor.hpp"
+#include "caf/send.hpp"
+
+#include "actors/module.hpp"
+#include "actors/runtime/system.hpp"
+#include "apps/dds_gateway/gateway.hpp"
+
+#include "std_msgs/Basic.h"
+
+using namespace herm;
+using namespace std::chrono_literals;
+
+namespace {
+
+const char* loopback_only
+  = "<CycloneDDS><Domain><General><Interfaces><NetworkInterface name=\"lo\"/>"
+    "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>"
+    "<Peers><Peer address=\"127.0.0.1\"/></Peers><ParticipantIndex>auto"
+    "</ParticipantIndex></Discovery></Domain></CycloneDDS>";
+
+/// Polls `done` every 10 ms for at most 20 s.
+bool eventually(const std::function<bool()>& done) {
+  for (int i = 0; i < 2000; ++i) {
+    if (done())
+      return true;
+    std::this_thread::sleep_for(10ms);
+  }
+  return false;
+}
+
+struct seen {
+  std::mutex mtx;
+  std::vector<std::string> values;
+
+  size_t count(const std::string& x) {
+    std::lock_guard<std::mutex> guard{mtx};
+    return static_cast<size_t>(std::count(values.begin(), values.end(), x));
+  }
+};
+
+class gateway_loop_test : public ::testing::Test {
+protected:
+  gateway_loop_test() : sys_{init(cfg_)} {
+    // nop
+  }
+
+  static caf::actor_system_config& init(caf::actor_system_config& cfg) {
+    ::setenv("CYCLONEDDS_URI", loopback_only, 1);
+    configure(cfg);
+    cfg.add_message_types<caf::id_block::herm_apos>();
+    dds_gateway::add_gateway_types(cfg);
+    return cfg;
+  }
+
+  void SetUp() override {
+    domain_ = 1 + static_cast<uint32_t>((::getpid() + 100) % 200);
+    module_config mc;
+    mc.routing.id = 0x41;
+    auto m = run_module(sys_, mc);
+    ASSERT_TRUE(m) << render(m.error());
+    module_ = std::move(*m);
+    pp_ = dds_create_participant(domain_, nullptr, nullptr);
+    ASSERT_GT(pp_, 0) << dds_strretcode(pp_);
+  }
+
+  void TearDown() override {
+    // The actor system waits for every actor when it ends.
+    if (gw_)
+      caf::anon_send_exit(gw_, caf::exit_reason::user_shutdown);
+    for (auto& sub : subs_)
+      caf::anon_send_exit(sub, caf::exit_reason::user_shutdown);
+    if (pp_ > 0)
+      dds_delete(pp_);
+  }
+
+  void start(const std::map<std::string, std::string>& options) {
+    auto o = options;
+    o["domain"] = std::to_string(domain_);
+    auto cfg = dds_gateway::parse_gateway_options(o);
+    ASSERT_TRUE(cfg) << render(cfg.error());
+    const module_handles& h = module_.handles();
+    auto gw = dds_gateway::spawn_dds_gateway(sys_, h, *cfg);
+    ASSERT_TRUE(gw) << render(gw.error());
+    gw_ = *gw;
+  }
+
+  dds_gateway::gateway_stats stats() {
+    dds_gateway::gateway_stats out;
+    caf::scoped_actor self{sys_};
+    self->request(gw_, 5s, atom::get_v, atom::stats_v)
+      .receive([&](const dds_gateway::gateway_stats& s) { out = s; },
+               [](caf::error& err) { FAIL() << render(err); });
+    return out;
+  }
+
+  /// A HERM subscriber of `topic` that records strings into `into`.
+  void subscribe(const std::string& topic, seen& into) {
+    auto sub = sys_.spawn([&into](caf::event_based_actor*) -> caf::behavior {
+      return {[&into](const std::string& x) {
+        std::lock_guard<std::mutex> guard{into.mtx};
+        into.values.push_back(x);
+      }};
+    });
+    subs_.push_back(sub);
+    caf::scoped_actor self{sys_};
+    const module_handles& h = module_.handles();
+    self->request(h.apps, 5s, atom::subscribe_v, topic, sub)
+      .receive([] {}, [](caf::error& err) { FAIL() << render(err); });
+  }
+
+  caf::actor_system_config cfg_;
+  caf::actor_system sys_;
+  running_module module_;
+  caf::actor gw_;
+  std::vector<caf::actor> subs_;
+  uint32_t domain_ = 0;
+  dds_entity_t pp_ = 0;
+};
+
+/// Every string a reader holds, taken.
+std::vector<std::string> take_strings(dds_entity_t reader) {
+  std::vector<std::string> out;
+  void* samples[8] = {nullptr};
+  dds_sample_info_t infos[8];
+  auto n = dds_take(reader, samples, infos, 8, 8);
+  for (int i = 0; i < n; ++i)
+    if (infos[i].valid_data)
+      out.emplace_back(static_cast<std_msgs_msg_dds__String_*>(samples[i])->data);
+  if (n > 0)
+    dds_return_loan(reader, samples, n);
+  return out;
+}
+
+} // namespace
+
+TEST_F(gateway_loop_test, a_both_mapping_carries_each_value_once_each_way) {
+  start({{"chat.type", "std_msgs/msg/String"}, {"chat.direction", "both"}});
+  seen herm_side;
+  subscribe("chat", herm_side);
+  auto topic = dds_create_topic(pp_, &std_msgs_msg_dds__String__desc, "rt/chat",
+                                nullptr, nullptr);
+  ASSERT_GT(topic, 0);
+  auto reader = dds_create_reader(pp_, topic, nullptr, nullptr);
+  auto writer = dds_create_writer(pp_, topic, nullptr, nullptr);
+  ASSERT_GT(reader, 0);
+  ASSERT_GT(writer, 0);
+  // Both ends matched the gateway's.
+  ASSERT_TRUE(eventually([&] {
+    dds_publication_matched_status_t p;
+    dds_subscription_matched_status_t s;
+    return dds_get_publication_matched_status(writer, &p) == 0
+           && p.current_count > 0
+           && dds_get_subscription_matched_status(reader, &s) == 0
+           && s.current_count > 0;
+  }));
+  // HERM -> DDS, once.
+  const module_handles& h = module_.handles();
+  caf::anon_send(h.apps, atom::publish_v, std::string{"chat"},
+                 caf::make_message(std::string{"from herm"}));
+  std::vector<std::string> on_dds;
+  ASSERT_TRUE(eventually([&] {
+    for (auto& x : take_strings(reader))
+      on_dds.push_back(x);
+    return !on_dds.empty();
+  }));
+  EXPECT_EQ(on_dds, std::vector<std::string>{"from herm"});
+  // DDS -> HERM, once, and not written back to DDS: the gateway takes its
+  // own publication for what it is.
+  std_msgs_msg_dds__String_ sample{const_cast<char*>("from dds")};
+  ASSERT_EQ(dds_write(writer, &sample), 0);
+  ASSERT_TRUE(eventually([&] { return herm_side.count("from dds") == 1; }));
+  ASSERT_TRUE(eventually([&] { return stats().looped_back == 1; }));
+  auto st = stats();
+  EXPECT_EQ(st.to_dds, 1u);   // "from herm" only
+  EXPECT_EQ(st.from_dds, 1u); // "from dds" only: its own write never came in
+  EXPECT_EQ(st.dds_rejected, 0u);
+  EXPECT_EQ(herm_side.count("from herm"), 1u);
+}
+
+TEST_F(gateway_loop_test, a_herm_value_of_the_wrong_type_is_dropped_and_counted) {
+  start({{"level.type", "std_msgs/msg/Int32"}});
+  auto topic = dds_create_topic(pp_, &std_msgs_msg_dds__Int32__desc, "rt/level",
+                                nullptr, nullptr);
+  auto reader = dds_create_reader(pp_, topic, nullptr, nullptr);
+  ASSERT_GT(reader, 0);
+  ASSERT_TRUE(eventually([&] {
+    dds_subscription_matched_status_t s;
+    return dds_get_subscription_matched_status(reader, &s) == 0
+           && s.current_count > 0;
+  }));
+  const module_handles& h = module_.handles();
+  caf::anon_send(h.apps, atom::publish_v, std::string{"level"},
+                 caf::make_message(2.5)); // a double, not an int32_t
+  caf::anon_send(h.apps, atom::publish_v, std::string{"level"},
+                 caf::make_message(int32_t{7}));
+  ASSERT_TRUE(eventually([&] { return stats().to_dds == 1; }));
+  auto st = stats();
+  EXPECT_EQ(st.herm_rejected, 1u);
+  std::vector<int32_t> got;
+  ASSERT_TRUE(eventually([&] {
+    void* samples[4] = {nullptr};
+    dds_sample_info_t infos[4];
+    auto n = dds_take(reader, samples, infos, 4, 4);
+    for (int i = 0; i < n; ++i)
+      if (infos[i].valid_data)
+        got.push_back(static_cast<std_msgs_msg_dds__Int32_*>(samples[i])->data);
+    if (n > 0)
+      dds_return_loan(reader, samples, n);
+    return !got.empty();
+  }));
+  EXPECT_EQ(got, std::vector<int32_t>{7});
+}
