@@ -151,6 +151,7 @@ caf::expected<caf::message> range_from(const void* sample,
 
 // -- geometry_msgs/Twist <-> twist -----------------------------------------------------
 
+// [twist-conversion]
 vector3 from_wire(const geometry_msgs_msg_dds__Vector3_& v) {
   return {v.x, v.y, v.z};
 }
@@ -183,6 +184,7 @@ caf::expected<caf::message> twist_from(const void* sample,
     return bad("a twist with a NaN or infinite component");
   return caf::make_message(t);
 }
+// [twist-conversion-end]
 
 template <class Sample>
 ros_type row(const char* name, const char* herm_type,
@@ -212,9 +214,11 @@ const std::vector<ros_type>& ros_types() {
                                      "herm.srf04_reading",
                                      sensor_msgs_msg_dds__Range__desc, range_to,
                                      range_from),
+    // [twist-row]
     row<geometry_msgs_msg_dds__Twist_>("geometry_msgs/msg/Twist", "herm.twist",
                                        geometry_msgs_msg_dds__Twist__desc,
                                        twist_to, twist_from),
+    // [twist-row-end]
   };
   return types;
 }

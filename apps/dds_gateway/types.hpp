@@ -33,6 +33,7 @@ inline bool operator==(const vector3& a, const vector3& b) {
   return a.x == b.x && a.y == b.y && a.z == b.z;
 }
 
+// [twist-type]
 /// A motion command: geometry_msgs/msg/Twist on the DDS side.
 struct twist {
   vector3 linear;
@@ -47,6 +48,7 @@ typename Inspector::result_type inspect(Inspector& f, twist& t) {
 inline bool operator==(const twist& a, const twist& b) {
   return a.linear == b.linear && a.angular == b.angular;
 }
+// [twist-type-end]
 
 /// What a gateway did since it started (answer to `get, stats`).
 struct gateway_stats {
