@@ -105,6 +105,9 @@ foreach(dir actors channels routing)
     DESTINATION ${HERM_INSTALL_INCLUDEDIR}
     FILES_MATCHING PATTERN "*.hpp" PATTERN "*.def")
 endforeach()
+# The users' one header: <herm/herm.hpp> (include/herm is on the path).
+install(FILES "${PROJECT_SOURCE_DIR}/actors/include/herm/herm.hpp"
+  DESTINATION ${HERM_INSTALL_INCLUDEDIR}/herm)
 
 # -- the CMake package ------------------------------------------------------------
 # Static libraries carry their private dependencies into the user's link

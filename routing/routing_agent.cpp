@@ -7,6 +7,7 @@
 // agent_auth.cpp.
 
 #include <algorithm>
+#include <limits>
 #include <memory>
 #include <random>
 #include <type_traits>
@@ -152,14 +153,27 @@ bool fresh_flood(agent_impl self, packet_type type, uint64_t a, uint64_t b) {
                          self->clock().now(), lifetime);
 }
 
+/// The channel a flood that came on `in` is not relayed on: `in` itself on
+/// a medium where every station hears every frame (a CAN bus, an emulated
+/// medium, an in-process segment), none on a UDP channel, whose
+/// "broadcast" is one datagram to each configured peer: the other peers of
+/// the module it came from did not hear it (the sender drops its own copy
+/// as a duplicate).
+channel_id relay_except(agent_impl self, channel_id in) {
+  auto i = self->state.channels.find(in);
+  if (i != self->state.channels.end() && i->second.info.kind == "udp")
+    return std::numeric_limits<channel_id>::max();
+  return in;
+}
+
 /// Relays a flooded control packet (claim, conflict) on every channel but
-/// the one it came on, one hop less, while it has hops left.
+/// the one it came on (relay_except), one hop less, while it has hops left.
 template <class T>
 void relay_flood(agent_impl self, T fwd, channel_id in) {
   if (fwd.hop_limit <= 1)
     return;
   fwd.hop_limit = static_cast<uint8_t>(fwd.hop_limit - 1);
-  send_all(self, encoded(self, fwd), in);
+  send_all(self, encoded(self, fwd), relay_except(self, in));
 }
 
 // -- route changes --------------------------------------------------------------
@@ -392,7 +406,7 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
       if (h->hop_limit > 1) {
         set_hop_limit(bytes.data(), static_cast<uint8_t>(h->hop_limit - 1));
         ++st.stats.broadcasts_relayed;
-        send_all(self, bytes, ch, h->priority);
+        send_all(self, bytes, relay_except(self, ch), h->priority);
       }
       return;
     }

@@ -14,6 +14,7 @@
 #include <deque>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <thread>
@@ -505,11 +506,19 @@ int cmd_info(const std::string& file, bool json_out) {
 }
 
 int cmd_play(const std::string& path, const std::string& file, double rate,
-             bool loop, const std::vector<std::string>& only, bool json_out,
+             bool loop, const std::vector<std::string>& only,
+             const std::vector<std::string>& remaps, bool json_out,
              std::chrono::milliseconds timeout) {
   catch_signals();
   if (!(rate > 0))
     throw topic_failure{exit_usage, "--rate must be above 0"};
+  std::map<std::string, std::string> renamed;
+  for (auto& r : remaps) {
+    auto sep = r.find(":=");
+    if (sep == 0 || sep == std::string::npos || sep + 2 >= r.size())
+      throw topic_failure{exit_usage, "--remap takes FROM:=TO, got '" + r + "'"};
+    renamed[r.substr(0, sep)] = r.substr(sep + 2);
+  }
   auto b = bag::open(file);
   connection c{path};
   uint64_t sent = 0;
@@ -528,8 +537,9 @@ int cmd_play(const std::string& path, const std::string& file, double rate,
       while (!interrupted && clock_type::now() < at)
         std::this_thread::sleep_for(
           std::min<clock_type::duration>(at - clock_type::now(), 100ms));
+      auto to = renamed.find(m.topic);
       c.call({{"cmd", "publish"},
-              {"topic", m.topic},
+              {"topic", to != renamed.end() ? to->second : m.topic},
               {"payload", herm::to_hex_bytes(m.payload.data(), m.payload.size())}},
              timeout);
       ++sent;
@@ -590,6 +600,7 @@ topic_commands::topic_commands(CLI::App& app) {
   play_->add_option("-r,--rate", play_rate, "speed factor (default 1)");
   play_->add_flag("-l,--loop", loop, "start again at the end");
   play_->add_option("--topics", topics, "only these topics");
+  play_->add_option("--remap", remaps, "publish topic FROM as TO (FROM:=TO)");
 }
 
 bool topic_commands::parsed() const {
@@ -624,7 +635,8 @@ int topic_commands::run(const std::string& path, uint32_t timeout_ms,
                         timeout);
     }
     if (play_->parsed())
-      return cmd_play(path, file, play_rate, loop, topics, json_out, timeout);
+      return cmd_play(path, file, play_rate, loop, topics, remaps, json_out,
+                      timeout);
   } catch (const bag_error& e) {
     throw topic_failure{exit_failed, e.what()};
   }

@@ -61,6 +61,7 @@ private:
   std::string file;
   double play_rate = 1.0;
   bool loop = false;
+  std::vector<std::string> remaps;
 };
 
 } // namespace hermctl

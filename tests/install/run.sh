@@ -100,7 +100,7 @@ fi
 echo "== run the consumer"
 out=$("$tmp/consumer/herm_consumer" 2>&1) || { echo "$out"; echo "FAIL: consumer exited with an error"; exit 1; }
 echo "$out"
-if ! grep -q "^herm consumer: registered 'echo' (consumer.echo) as APO [0-9]*; link_cost(can2.0) = [1-9]" <<<"$out"; then
+if ! grep -q "^herm consumer: registered 'echo' (consumer.echo) as APO [0-9]*; link_cost(can2.0) = [1-9][0-9]*; reading has 2 described fields" <<<"$out"; then
   echo "FAIL: unexpected output"; exit 1
 fi
 echo "PASS"

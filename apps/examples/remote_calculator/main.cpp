@@ -8,6 +8,9 @@
 // "calculator"; the calling module binds to it by name and sends it
 // requests as if it were a local actor. The modules talk over UDP on
 // loopback here; over CAN, IEEE 1394 or a serial line the code is the same.
+// Each process also serves a control socket named after its role
+// ("calculator", "caller"), so hermctl sees it as it sees hermd:
+// `hermctl --name calculator topic echo calculator.results`.
 // docs/user-guide quotes the regions marked "// [name]" ... "// [name-end]".
 
 #include <atomic>
@@ -19,37 +22,34 @@
 
 #include <CLI/CLI.hpp>
 
-#include "caf/actor_system.hpp"
-#include "caf/actor_system_config.hpp"
-#include "caf/event_based_actor.hpp"
-#include "caf/scoped_actor.hpp"
-
-#include "actors/config.hpp"
-#include "actors/module.hpp"
-#include "actors/runtime/error.hpp"
-#include "actors/runtime/system.hpp"
-#include "actors/runtime/type_ids.hpp"
+#include <herm/herm.hpp>
 
 using namespace std::chrono_literals;
 
 // [type]
-// A message type of our own: a plain struct with an inspect overload. That is
-// all it needs to travel between modules (HERM marshals it field by field).
+// Message types of our own: plain structs, each made a HERM message type by
+// one line that lists its fields. That is all they need to travel between
+// modules (HERM marshals them field by field) and to be printed and typed
+// by name in hermctl (`hermctl call calculator '{"a":1,"b":2,"op":"+"}'
+// -t calc_request`).
 struct calc_request {
   int32_t a = 0;
   int32_t b = 0;
   std::string op; // "+", "-", "*" or "/"
 };
+HERM_MESSAGE(calc_request, a, b, op)
 
-template <class Inspector>
-typename Inspector::result_type inspect(Inspector& f, calc_request& x) {
-  return f(caf::meta::type_name("calc_request"), x.a, x.b, x.op);
-}
+struct calc_result {
+  calc_request request;
+  int32_t value = 0;
+};
+HERM_MESSAGE(calc_result, request, value)
 
 // Our own type-ID block starts where HERM's ends. Both modules register it:
-// the type's name ("calc_request") identifies it on the wire.
+// a type's name ("calc_request") identifies it on the wire.
 CAF_BEGIN_TYPE_ID_BLOCK(calculator_example, caf::id_block::herm::end)
   CAF_ADD_TYPE_ID(calculator_example, (calc_request))
+  CAF_ADD_TYPE_ID(calculator_example, (calc_result))
 CAF_END_TYPE_ID_BLOCK(calculator_example)
 // [type-end]
 
@@ -91,10 +91,7 @@ caf::behavior calculator(caf::event_based_actor* self,
       auto x = compute(r);
       if (!x)
         return x.error();
-      self->send(apps, herm::atom::publish_v, std::string{"calculator.results"},
-                 caf::make_message(std::to_string(r.a) + " " + r.op + " "
-                                   + std::to_string(r.b) + " = "
-                                   + std::to_string(*x)));
+      herm::publish(apps, "calculator.results", calc_result{r, *x});
       return *x;
     },
   };
@@ -102,27 +99,33 @@ caf::behavior calculator(caf::event_based_actor* self,
 // [apo-end]
 
 // [start]
-/// Starts this process's module in code: one UDP interface on loopback.
-caf::expected<herm::module_handles> start(caf::actor_system& sys,
-                                          herm::module_id id, uint16_t port,
-                                          const std::string& peers) {
+/// Starts this process's module in code: one UDP interface on loopback,
+/// and its control socket under `name` (where hermctl looks for it). The
+/// module stops when the result goes out of scope.
+caf::expected<herm::served_module> start(caf::actor_system& sys,
+                                         const std::string& name,
+                                         const std::string& socket,
+                                         herm::module_id id, uint16_t port,
+                                         const std::string& peers) {
   herm::module_config mc;
   mc.routing.id = id;
   mc.routing.hello_interval = 100ms; // converge fast (default: 1 s)
   mc.devices.push_back({"eth0", "udp", "127.0.0.1:" + std::to_string(port),
                         {{"peers", peers}}});
-  return herm::start_module(sys, mc);
+  return herm::serve_module(sys, mc, name, socket);
 }
 
 /// Or from a configuration file, the same one hermd reads
 /// (docs/user-guide.md, "Configuration reference"); its errors name the
-/// file, line and field.
-caf::expected<herm::module_handles> start_from(caf::actor_system& sys,
-                                               const std::string& path) {
+/// file, line and field, and its control section names the socket.
+caf::expected<herm::served_module> start_from(caf::actor_system& sys,
+                                              const std::string& path) {
   auto cfg = herm::load_config(path);
   if (!cfg)
     return cfg.error();
-  return herm::start_module(sys, cfg->module);
+  return herm::serve_module(sys, cfg->module, cfg->name,
+                            cfg->control_socket.empty() ? "-"
+                                                        : cfg->control_socket);
 }
 // [start-end]
 
@@ -158,48 +161,40 @@ int serve(caf::actor_system& sys, const herm::module_handles& m, int seconds) {
 // [bind]
 // Finds the APO named "calculator" anywhere in the network and returns a
 // proxy: a local caf::actor that stands for it. Right after start-up the
-// routes are still converging, so not_found and no_route mean "try again".
-caf::actor bind_calculator(caf::scoped_actor& self, herm::app_support_actor asl) {
-  auto deadline = std::chrono::steady_clock::now() + 10s;
-  while (std::chrono::steady_clock::now() < deadline) {
-    caf::actor proxy;
-    caf::error err;
-    self->request(asl, 5s, herm::atom::bind_v,
-                  herm::bind_request{herm::query_by::name, "calculator", 2000,
-                                     false})
-      .receive([&](caf::actor& p) { proxy = p; },
-               [&](caf::error& e) { err = e; });
-    if (proxy)
-      return proxy;
-    if (!herm::is(err, herm::app_ec::not_found) && !herm::is(err, herm::routing_ec::no_route)) {
-      say("error " + herm::render(err));
-      break;
-    }
-    std::this_thread::sleep_for(200ms);
+// routes are still converging: bind_within keeps looking until its
+// deadline, then fails with a typed error (herm.not_found, herm.no_route).
+caf::actor bind_calculator(caf::actor_system& sys, herm::app_support_actor asl) {
+  auto proxy = herm::bind_within(sys, asl, "calculator", 10s);
+  if (!proxy) {
+    say("error " + herm::render(proxy.error()));
+    return {};
   }
-  return {};
+  return *proxy;
 }
 // [bind-end]
 
 int call(caf::actor_system& sys, const herm::module_handles& m) {
   caf::scoped_actor self{sys};
   // [subscribe]
-  // Any actor can subscribe to a topic; it receives every value published
-  // on any module, as the message that was published.
-  auto listener = sys.spawn([](caf::event_based_actor*) -> caf::behavior {
-    return {[](const std::string& line) {
-      say("published: " + line);
-    }};
-  });
-  self->request(m.apps, 5s, herm::atom::subscribe_v,
-                std::string{"calculator.results"}, listener)
-    .receive([] {}, [](caf::error& err) {
-      say("error " + herm::render(err));
+  // Any actor can subscribe to a topic and receives every value published
+  // on any module. A typed subscription gets each calc_result with its
+  // topic, publishing module and time.
+  auto listener = herm::subscribe<calc_result>(
+    sys, m.apps, "calculator.results",
+    [](const herm::topic_message<calc_result>& x) {
+      auto& r = x.value.request;
+      say("published by " + herm::to_hex(x.publisher) + ": "
+          + std::to_string(r.a) + " " + r.op + " " + std::to_string(r.b)
+          + " = " + std::to_string(x.value.value));
     });
+  if (!listener) {
+    say("error " + herm::render(listener.error()));
+    return 1;
+  }
   // [subscribe-end]
-  auto proxy = bind_calculator(self, m.apps);
+  auto proxy = bind_calculator(sys, m.apps);
   if (!proxy) {
-    self->send_exit(listener, caf::exit_reason::user_shutdown);
+    self->send_exit(*listener, caf::exit_reason::user_shutdown);
     return 1;
   }
   // A monitor on the proxy learns when the calculator exits or its module
@@ -233,7 +228,7 @@ int call(caf::actor_system& sys, const herm::module_handles& m) {
     caf::after(0ms) >> [] {});
   // Give the published results a moment to arrive before leaving.
   std::this_thread::sleep_for(500ms);
-  self->send_exit(listener, caf::exit_reason::user_shutdown);
+  self->send_exit(*listener, caf::exit_reason::user_shutdown);
   return failures == 0 ? 0 : 1;
 }
 
@@ -245,11 +240,15 @@ int main(int argc, char** argv) {
   uint16_t port = 0;
   std::string peer;
   std::string config;
+  std::string socket;
   int seconds = 0;
   app.add_option("--port", port, "local UDP port (serve: 47100, call: 47101)");
   app.add_option("--peer", peer, "the other module's UDP address(es), comma-separated");
   app.add_option("--config", config,
                  "start the module from this configuration file instead");
+  app.add_option("--control", socket,
+                 "control socket (default: where hermctl looks for the "
+                 "module named calculator or caller; -: none)");
   auto* serve_cmd = app.add_subcommand("serve", "register the calculator APO");
   serve_cmd->add_option("--seconds", seconds, "stop after N seconds (0: on SIGINT)");
   app.add_subcommand("call", "bind to the calculator and send it requests");
@@ -266,15 +265,14 @@ int main(int argc, char** argv) {
   // HERM's types, then ours.
   caf::actor_system_config cfg;
   herm::configure(cfg);
-  cfg.add_message_types<caf::id_block::calculator_example>();
+  herm::add_message_types<caf::id_block::calculator_example>(cfg);
   caf::actor_system sys{cfg};
-  auto m = config.empty() ? start(sys, serving ? 0x20 : 0x21, port, peer)
+  auto m = config.empty() ? start(sys, serving ? "calculator" : "caller",
+                                  socket, serving ? 0x20 : 0x21, port, peer)
                           : start_from(sys, config);
   if (!m) {
     say("error " + herm::render(m.error()));
     return 1;
   }
-  auto status = serving ? serve(sys, *m, seconds) : call(sys, *m);
-  herm::stop_module(*m);
-  return status;
+  return serving ? serve(sys, *m, seconds) : call(sys, *m);
 }

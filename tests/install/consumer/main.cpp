@@ -1,24 +1,28 @@
-// A user's module process, built against the installed HERM package: starts
+// A user's module process, built against the installed HERM package and its
+// one header <herm/herm.hpp>: a message type in one line (HERM_MESSAGE),
 // one module (IO manager, routing agent, application support) on an
-// in-process segment, registers an APO, asks the routing layer for a link's
-// cost, prints one line and stops.
+// in-process segment, an APO registered, a link's cost from the routing
+// layer; prints one line and stops.
 
 #include <chrono>
 #include <iostream>
 #include <string>
 
-#include "caf/actor_system.hpp"
-#include "caf/actor_system_config.hpp"
-#include "caf/event_based_actor.hpp"
-#include "caf/scoped_actor.hpp"
+#include <herm/herm.hpp>
 
-#include "actors/module.hpp"
-#include "actors/runtime/error.hpp"
-#include "actors/runtime/system.hpp"
-#include "actors/runtime/type_ids.hpp"
 #include "channels/link_profile.hpp"
 
 using namespace std::chrono_literals;
+
+struct reading {
+  uint16_t distance_mm = 0;
+  std::string source;
+};
+HERM_MESSAGE(reading, distance_mm, source)
+
+CAF_BEGIN_TYPE_ID_BLOCK(consumer, caf::id_block::herm::end)
+  CAF_ADD_TYPE_ID(consumer, (reading))
+CAF_END_TYPE_ID_BLOCK(consumer)
 
 namespace {
 
@@ -32,6 +36,7 @@ int main() {
   // [embed]
   caf::actor_system_config cfg;
   herm::configure(cfg); // HERM's type IDs, error category and scheduler
+  herm::add_message_types<caf::id_block::consumer>(cfg); // and our own
   caf::actor_system sys{cfg};
   herm::module_config mc;
   mc.routing.id = 7;
@@ -54,7 +59,9 @@ int main() {
         std::cout << "herm consumer: registered '" << ref.name << "' ("
                   << ref.type << ") as APO " << ref.apo
                   << "; link_cost(can2.0) = " << (can ? herm::link_cost(*can) : 0)
-                  << std::endl;
+                  << "; reading has "
+                  << herm::find_description("reading")->fields.size()
+                  << " described fields" << std::endl;
         rc = 0;
       },
       [&](caf::error& e) {
