@@ -573,7 +573,8 @@ public:
     if (!v.is_object())
       return where + "expected an object with the fields of '" + name
              + "', got " + v.dump();
-    for (auto& [key, x] : v.items()) {
+    for (auto& item : v.items()) {
+      const auto& key = item.key();
       auto known = std::any_of(d->fields.begin(), d->fields.end(),
                                [&](auto& f) { return f.name == key; });
       if (!known)
