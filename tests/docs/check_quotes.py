@@ -159,22 +159,26 @@ def check_command(bins, argv, where):
     if prog not in ("hermd", "hermctl"):
         return False
     opts = options_of(bins.help(prog))
-    sub = None
+    sub = []  # the subcommand and its own subcommands (topic echo)
     i = 1
     while i < len(argv):
         word = argv[i]
         name = word.split("=", 1)[0]
         if word.startswith("-"):
             if name not in opts:
-                raise Mismatch(f"{where}: {prog}{' ' + sub if sub else ''} "
+                raise Mismatch(f"{where}: {' '.join([prog] + sub)} "
                                f"has no option {name}")
             if opts[name] and "=" not in word:
                 i += 1
-        elif prog == "hermctl" and sub is None:
+        elif prog == "hermctl" and not sub:
             if word not in subcommands_of(bins.help("hermctl")):
                 raise Mismatch(f"{where}: hermctl has no subcommand {word}")
-            sub = word
-            opts = dict(opts, **options_of(bins.help("hermctl", sub)))
+            sub = [word]
+            opts = dict(opts, **options_of(bins.help("hermctl", *sub)))
+        elif prog == "hermctl" and word in subcommands_of(
+                bins.help("hermctl", *sub)):
+            sub.append(word)
+            opts = dict(opts, **options_of(bins.help("hermctl", *sub)))
         i += 1
     return True
 
@@ -346,8 +350,9 @@ case "$1" in
 esac
 """
 FAKE_HERMCTL = r"""#!/bin/sh
-if [ "$1" = --help ]; then printf 'Options:\n  --module TEXT  m\n  --json  j\nSubcommands:\n  info  i\n  ping  p\n'; exit 0; fi
-if [ "$2" = --help ]; then printf 'Options:\n  -c,--count UINT  n\n'; exit 0; fi
+if [ "$1" = --help ]; then printf 'Options:\n  --module TEXT  m\n  --json  j\nSubcommands:\n  info  i\n  ping  p\n  topic  t\n'; exit 0; fi
+if [ "$2" = --help ]; then printf 'Options:\n  -c,--count UINT  n\nSubcommands:\n  echo  e\n'; exit 0; fi
+if [ "$3" = --help ]; then printf 'Options:\n  -n,--times UINT  n\n'; exit 0; fi
 echo "$@"
 """
 GOOD = {
@@ -368,6 +373,7 @@ BLOCKS = [  # (marker, good block, the same block planted with a mismatch)
     ("usage", "$ hermctl --module 0x31 ping 0x32 -c 3\nout\nhermd --check x",
      "hermd --log-levels debug x.yaml"),
     ("usage", "hermctl --json info", "hermctl --json neighbours"),
+    ("usage", "hermctl topic echo x -n 3 --json", "hermctl topic echo x --rate 3"),
     ("usage", "build/bin/hermd x.yaml", "build/bin/herm-gone x.yaml"),
     ("json: src/j.cpp", '{"cmd": "info"}\n{"ok": true, "result": 1}',
      '{"ok": true, "results": 1}'),
