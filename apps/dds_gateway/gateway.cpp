@@ -16,6 +16,7 @@
 #include "actors/runtime/atoms.hpp"
 #include "actors/runtime/error.hpp"
 #include "actors/unexpected.hpp"
+#include "apps/dds_gateway/service_client.hpp"
 
 namespace herm::dds_gateway {
 
@@ -28,6 +29,8 @@ using dds_in_atom = caf::atom_constant<caf::atom("gw_dds_in")>;
 using reject_atom = caf::atom_constant<caf::atom("gw_reject")>;
 using out_atom = caf::atom_constant<caf::atom("gw_out")>;
 using ready_atom = caf::atom_constant<caf::atom("gw_ready")>;
+/// A DDS service request for a server mapping: index, guid, seq, request.
+using svc_request_atom = caf::atom_constant<caf::atom("gw_svc_rq")>;
 
 /// Remembered own publications per `both` mapping (see gateway.hpp).
 constexpr size_t max_echoes = 64;
@@ -36,14 +39,22 @@ constexpr int32_t take_batch = 16;
 
 // -- the DDS side ---------------------------------------------------------------------
 
+/// What a reader reads: a topic's samples, a server mapping's requests or
+/// a client mapping's replies.
+enum class reads { topic, requests, replies };
+
 /// What a reader's listener needs; owned by the bridge, stable in memory.
 struct reader_ctx {
-  caf::weak_actor_ptr gateway;
+  /// The gateway, or a client mapping's proxy (replies).
+  caf::weak_actor_ptr target;
+  reads what = reads::topic;
   uint32_t index = 0;
   const mapping* m = nullptr;
   /// Samples taken on this reader (Cyclone's thread only).
   uint64_t count = 0;
-  std::atomic<uint32_t>* backlog = nullptr;
+  /// Replies: the client's own guid (others' replies are not taken up).
+  uint64_t guid = 0;
+  std::shared_ptr<std::atomic<uint32_t>> backlog;
   std::atomic<uint64_t>* backlog_dropped = nullptr;
   uint32_t max_backlog = 0;
 };
@@ -57,8 +68,11 @@ struct bridge {
   /// Per mapping; 0 where the mapping has none.
   std::vector<dds_entity_t> writers;
   std::vector<dds_entity_t> readers;
+  /// Per mapping: a client mapping's proxy APO.
+  std::vector<caf::actor> clients;
   std::vector<std::unique_ptr<reader_ctx>> contexts;
-  std::atomic<uint32_t> backlog{0};
+  std::shared_ptr<std::atomic<uint32_t>> backlog
+    = std::make_shared<std::atomic<uint32_t>>(0);
   std::atomic<uint64_t> backlog_dropped{0};
 
   ~bridge() {
@@ -67,11 +81,51 @@ struct bridge {
   }
 };
 
+/// One sample to its actor, converted (Cyclone's thread).
+void hand_over(reader_ctx* c, const caf::actor& to, const void* sample) {
+  auto& m = *c->m;
+  caf::expected<caf::message> v{caf::message{}};
+  request_header h;
+  switch (c->what) {
+    case reads::topic:
+      v = m.type->from_dds(sample, m.conv, c->count++);
+      break;
+    case reads::requests:
+      v = m.service->request_from_dds(sample, h);
+      if (v) {
+        caf::anon_send(to, svc_request_atom::value, c->index, h.guid, h.seq,
+                       std::move(*v));
+        return;
+      }
+      break;
+    case reads::replies:
+      v = m.service->reply_from_dds(sample, h);
+      if (v) {
+        caf::anon_send(to, svc_reply_atom::value, h.guid, h.seq,
+                       std::move(*v));
+        return;
+      }
+      break;
+  }
+  if (v)
+    caf::anon_send(to, dds_in_atom::value, c->index, std::move(*v));
+  else
+    caf::anon_send(to, reject_atom::value, c->index, render(v.error()));
+}
+
+/// Whether a reply sample is for this client (others' are not taken up).
+bool for_us(const reader_ctx* c, const void* sample) {
+  if (c->what != reads::replies)
+    return true;
+  request_header h;
+  return c->m->service->reply_from_dds(sample, h) && h.guid == c->guid;
+}
+
 /// Cyclone's receive thread: takes what the reader holds, converts it and
-/// hands it to the gateway. Never waits.
+/// hands it to the gateway (or a client's proxy). Never waits.
 void on_data_available(dds_entity_t reader, void* arg) {
   auto* c = static_cast<reader_ctx*>(arg);
-  auto gw = caf::actor_cast<caf::actor>(c->gateway.lock());
+  auto gw = caf::actor_cast<caf::actor>(c->target.lock());
   void* samples[take_batch];
   dds_sample_info_t infos[take_batch];
   for (;;) {
@@ -80,18 +134,14 @@ void on_data_available(dds_entity_t reader, void* arg) {
     if (n <= 0)
       return;
     for (int32_t i = 0; i < n; ++i) {
-      if (!infos[i].valid_data || !gw)
+      if (!infos[i].valid_data || !gw || !for_us(c, samples[i]))
         continue;
       if (c->backlog->fetch_add(1) >= c->max_backlog) {
         c->backlog->fetch_sub(1);
         c->backlog_dropped->fetch_add(1);
         continue;
       }
-      auto v = c->m->type->from_dds(samples[i], c->m->conv, c->count++);
-      if (v)
-        caf::anon_send(gw, dds_in_atom::value, c->index, std::move(*v));
-      else
-        caf::anon_send(gw, reject_atom::value, c->index, render(v.error()));
+      hand_over(c, gw, samples[i]);
     }
     dds_return_loan(reader, samples, n);
   }
@@ -119,15 +169,74 @@ dds_qos_t* make_qos(const mapping& m) {
   return q;
 }
 
+/// A reader of `topic` for mapping `i` whose listener hands samples to
+/// `target`.
+dds_entity_t open_reader(bridge& b, size_t i, dds_entity_t pp,
+                         dds_entity_t topic, const dds_qos_t* qos, reads what,
+                         const caf::actor& target, uint64_t guid = 0) {
+  auto c = std::make_unique<reader_ctx>();
+  c->target = caf::actor_cast<caf::weak_actor_ptr>(target);
+  c->what = what;
+  c->index = static_cast<uint32_t>(i);
+  c->m = &b.cfg.mappings[i];
+  c->guid = guid;
+  c->backlog = b.backlog;
+  c->backlog_dropped = &b.backlog_dropped;
+  c->max_backlog = b.cfg.max_backlog;
+  auto* l = dds_create_listener(c.get());
+  dds_lset_data_available(l, on_data_available);
+  auto r = dds_create_reader(pp, topic, qos, l);
+  dds_delete_listener(l);
+  b.contexts.push_back(std::move(c));
+  return r;
+}
+
+/// A service mapping's two topics, its writer and its reader (a client's
+/// reader feeds its proxy, spawned here).
+caf::error open_service(bridge& b, size_t i, dds_entity_t pp,
+                        const dds_qos_t* qos, const caf::actor& gw,
+                        caf::actor_system& sys) {
+  auto& m = b.cfg.mappings[i];
+  auto where = "DDS service '" + m.dds_topic + "' (domain "
+               + std::to_string(m.domain) + ")";
+  auto rq = dds_create_topic(pp, m.service->request_descriptor,
+                             m.request_topic().c_str(), nullptr, nullptr);
+  if (rq < 0)
+    return dds_failure(where + ", " + m.request_topic(), rq);
+  auto rr = dds_create_topic(pp, m.service->reply_descriptor,
+                             m.reply_topic().c_str(), nullptr, nullptr);
+  if (rr < 0)
+    return dds_failure(where + ", " + m.reply_topic(), rr);
+  if (m.server) {
+    b.writers[i] = dds_create_writer(pp, rr, qos, nullptr);
+    if (b.writers[i] < 0)
+      return dds_failure(where + ", reply writer", b.writers[i]);
+    b.readers[i] = open_reader(b, i, pp, rq, qos, reads::requests, gw);
+    if (b.readers[i] < 0)
+      return dds_failure(where + ", request reader", b.readers[i]);
+    return caf::none;
+  }
+  b.writers[i] = dds_create_writer(pp, rq, qos, nullptr);
+  if (b.writers[i] < 0)
+    return dds_failure(where + ", request writer", b.writers[i]);
+  dds_instance_handle_t guid = 0;
+  dds_get_instance_handle(b.writers[i], &guid);
+  b.clients[i] = spawn_service_client(sys, m, b.writers[i], guid, b.backlog);
+  b.readers[i] = open_reader(b, i, pp, rr, qos, reads::replies, b.clients[i],
+                             guid);
+  if (b.readers[i] < 0)
+    return dds_failure(where + ", reply reader", b.readers[i]);
+  return caf::none;
+}
+
 /// Creates every entity of `b` for the actor `gw`.
-caf::error open_dds(bridge& b, const caf::actor& gw) {
+caf::error open_dds(bridge& b, const caf::actor& gw, caf::actor_system& sys) {
   auto n = b.cfg.mappings.size();
   b.writers.assign(n, 0);
   b.readers.assign(n, 0);
+  b.clients.assign(n, caf::actor{});
   for (size_t i = 0; i < n; ++i) {
     auto& m = b.cfg.mappings[i];
-    auto where = "DDS topic '" + m.dds_topic + "' (domain "
-                 + std::to_string(m.domain) + ")";
     auto p = b.participants.find(m.domain);
     if (p == b.participants.end()) {
       auto e = dds_create_participant(m.domain, nullptr, nullptr);
@@ -135,30 +244,27 @@ caf::error open_dds(bridge& b, const caf::actor& gw) {
         return dds_failure("DDS domain " + std::to_string(m.domain), e);
       p = b.participants.emplace(m.domain, e).first;
     }
+    std::unique_ptr<dds_qos_t, void (*)(dds_qos_t*)> qos{make_qos(m),
+                                                        dds_delete_qos};
+    if (m.service != nullptr) {
+      if (auto err = open_service(b, i, p->second, qos.get(), gw, sys))
+        return err;
+      continue;
+    }
+    auto where = "DDS topic '" + m.dds_topic + "' (domain "
+                 + std::to_string(m.domain) + ")";
     auto topic = dds_create_topic(p->second, m.type->descriptor,
                                   m.dds_topic.c_str(), nullptr, nullptr);
     if (topic < 0)
       return dds_failure(where, topic);
-    std::unique_ptr<dds_qos_t, void (*)(dds_qos_t*)> qos{make_qos(m),
-                                                        dds_delete_qos};
     if (m.to_dds()) {
       b.writers[i] = dds_create_writer(p->second, topic, qos.get(), nullptr);
       if (b.writers[i] < 0)
         return dds_failure(where + ", writer", b.writers[i]);
     }
     if (m.from_dds()) {
-      auto c = std::make_unique<reader_ctx>();
-      c->gateway = caf::actor_cast<caf::weak_actor_ptr>(gw);
-      c->index = static_cast<uint32_t>(i);
-      c->m = &m;
-      c->backlog = &b.backlog;
-      c->backlog_dropped = &b.backlog_dropped;
-      c->max_backlog = b.cfg.max_backlog;
-      auto* l = dds_create_listener(c.get());
-      dds_lset_data_available(l, on_data_available);
-      b.readers[i] = dds_create_reader(p->second, topic, qos.get(), l);
-      dds_delete_listener(l);
-      b.contexts.push_back(std::move(c));
+      b.readers[i] = open_reader(b, i, p->second, topic, qos.get(),
+                                 reads::topic, gw);
       if (b.readers[i] < 0)
         return dds_failure(where + ", reader", b.readers[i]);
     }
@@ -183,6 +289,21 @@ caf::behavior relay(caf::event_based_actor* self, caf::actor gw,
   };
 }
 
+/// A DDS request waiting for its server mapping's APO to be bound.
+struct held_request {
+  request_header h;
+  caf::message req;
+};
+
+/// A server mapping's binding to its HERM APO, made at the first request
+/// (and again after a failure); requests wait for it, at most max_held.
+struct served_apo {
+  static constexpr size_t max_held = 16;
+  caf::actor proxy;
+  bool binding = false;
+  std::deque<held_request> held;
+};
+
 struct gateway_state {
   static inline const char* name = "herm.dds_gateway";
   std::shared_ptr<bridge> dds;
@@ -190,6 +311,8 @@ struct gateway_state {
   gateway_stats stats;
   /// Per mapping: what it published on HERM and has not seen come back.
   std::vector<std::deque<std::string>> echoes;
+  /// Per mapping: a server mapping's APO.
+  std::vector<served_apo> served;
 };
 
 using gateway_actor = caf::stateful_actor<gateway_state>;
@@ -211,6 +334,120 @@ void subscribe_all(gateway_actor* self) {
             });
   }
 }
+
+// -- services -------------------------------------------------------------------------
+
+void serve_failed(gateway_actor* self, const mapping& m,
+                  const std::string& why) {
+  auto& st = self->state;
+  ++st.stats.serve_failed;
+  spdlog::warn("dds_gateway: service '{}' -> APO '{}': no reply ({} so far): {}",
+               m.dds_topic, m.apo, st.stats.serve_failed, why);
+}
+
+/// Requests the APO of server mapping `i` and writes its answer as the
+/// reply to `h`.
+void serve(gateway_actor* self, uint32_t i, request_header h,
+           caf::message req) {
+  auto& m = self->state.dds->cfg.mappings[i];
+  auto proxy = self->state.served[i].proxy;
+  m.service->call(
+    self, proxy, m.timeout, std::move(req),
+    [self, i, h](caf::expected<caf::message> resp) {
+      auto& st = self->state;
+      auto& mi = st.dds->cfg.mappings[i];
+      if (!resp) {
+        serve_failed(self, mi, render(resp.error()));
+        return;
+      }
+      std::vector<unsigned char> sample(mi.service->reply_size);
+      if (auto err = mi.service->reply_to_dds(*resp, h, sample.data())) {
+        serve_failed(self, mi, render(err));
+        return;
+      }
+      if (auto rc = dds_write(st.dds->writers[i], sample.data()); rc < 0) {
+        ++st.stats.write_failed;
+        serve_failed(self, mi, std::string{"dds_write: "} + dds_strretcode(rc));
+        return;
+      }
+      ++st.stats.served;
+    });
+}
+
+/// Binds server mapping `i`'s APO unless bound or binding; then serves
+/// what was held.
+void bind_served(gateway_actor* self, uint32_t i) {
+  auto& sv = self->state.served[i];
+  if (sv.proxy || sv.binding)
+    return;
+  sv.binding = true;
+  auto& m = self->state.dds->cfg.mappings[i];
+  self->request(self->state.module.apps, 5s, atom::bind_v,
+                bind_request{query_by::name, m.apo, 1000, true, false})
+    .then(
+      [self, i](caf::actor& proxy) {
+        auto& s = self->state.served[i];
+        s.binding = false;
+        s.proxy = proxy;
+        while (!s.held.empty()) {
+          auto x = std::move(s.held.front());
+          s.held.pop_front();
+          serve(self, i, x.h, std::move(x.req));
+        }
+      },
+      [self, i](caf::error& err) {
+        auto& s = self->state.served[i];
+        s.binding = false;
+        auto& mi = self->state.dds->cfg.mappings[i];
+        while (!s.held.empty()) {
+          s.held.pop_front();
+          serve_failed(self, mi, "cannot bind APO '" + mi.apo + "': "
+                                   + render(err));
+        }
+      });
+}
+
+void on_service_request(gateway_actor* self, uint32_t i, request_header h,
+                        caf::message& req) {
+  auto& st = self->state;
+  auto& sv = st.served[i];
+  if (sv.proxy) {
+    serve(self, i, h, std::move(req));
+    return;
+  }
+  if (sv.held.size() >= served_apo::max_held) {
+    serve_failed(self, st.dds->cfg.mappings[i],
+                 "APO not bound yet and " + std::to_string(served_apo::max_held)
+                   + " requests waiting");
+    return;
+  }
+  sv.held.push_back({h, std::move(req)});
+  bind_served(self, i);
+}
+
+/// Registers each client mapping's proxy APO under its name.
+void register_clients(gateway_actor* self) {
+  auto& st = self->state;
+  auto& maps = st.dds->cfg.mappings;
+  for (size_t i = 0; i < maps.size(); ++i) {
+    auto& proxy = st.dds->clients[i];
+    if (!proxy)
+      continue;
+    self->link_to(proxy);
+    auto name = maps[i].herm_topic;
+    self->request(st.module.apps, 5s, atom::add_v, name,
+                  std::string{"ros."} + maps[i].service->name, proxy)
+      .then([name](apo_ref&) {
+              spdlog::info("dds_gateway: APO '{}' calls the DDS service", name);
+            },
+            [name](caf::error& err) {
+              spdlog::warn("dds_gateway: cannot register APO '{}': {}", name,
+                           render(err));
+            });
+  }
+}
+
+// -- topics ---------------------------------------------------------------------------
 
 void to_dds(gateway_actor* self, uint32_t i, caf::message& v) {
   auto& st = self->state;
@@ -247,12 +484,21 @@ caf::behavior gateway(gateway_actor* self, std::shared_ptr<bridge> dds,
   st.dds = std::move(dds);
   st.module = std::move(module);
   st.echoes.resize(st.dds->cfg.mappings.size());
+  st.served.resize(st.dds->cfg.mappings.size());
   self->set_default_handler(log_unexpected);
   return {
-    [self](ready_atom) { subscribe_all(self); },
+    [self](ready_atom) {
+      subscribe_all(self);
+      register_clients(self);
+    },
+    [self](svc_request_atom, uint32_t i, uint64_t guid, int64_t seq,
+           caf::message& req) {
+      self->state.dds->backlog->fetch_sub(1);
+      on_service_request(self, i, request_header{guid, seq}, req);
+    },
     [self](dds_in_atom, uint32_t i, caf::message& v) {
       auto& s = self->state;
-      s.dds->backlog.fetch_sub(1);
+      s.dds->backlog->fetch_sub(1);
       auto& m = s.dds->cfg.mappings[i];
       if (m.to_dds()) {
         auto& echoes = s.echoes[i];
@@ -265,7 +511,7 @@ caf::behavior gateway(gateway_actor* self, std::shared_ptr<bridge> dds,
     },
     [self](reject_atom, uint32_t i, std::string& why) {
       auto& s = self->state;
-      s.dds->backlog.fetch_sub(1);
+      s.dds->backlog->fetch_sub(1);
       ++s.stats.dds_rejected;
       auto& m = s.dds->cfg.mappings[i];
       spdlog::warn("dds_gateway: {} -> '{}': dropped a sample ({} so far): {}",
@@ -288,12 +534,23 @@ caf::expected<caf::actor> spawn_dds_gateway(caf::actor_system& sys,
   auto b = std::make_shared<bridge>();
   b->cfg = std::move(cfg);
   auto gw = sys.spawn(gateway, b, module);
-  if (auto err = open_dds(*b, gw)) {
+  if (auto err = open_dds(*b, gw, sys)) {
     caf::anon_send_exit(gw, caf::exit_reason::user_shutdown);
+    for (auto& c : b->clients)
+      if (c)
+        caf::anon_send_exit(c, caf::exit_reason::user_shutdown);
     return err;
   }
   for (auto& m : b->cfg.mappings)
-    spdlog::info("dds_gateway: '{}' {} DDS {} ({}, domain {}, {}, depth {}, {})",
+    if (m.service != nullptr)
+      spdlog::info("dds_gateway: {} DDS service {} ({}, {} / {}, domain {}, "
+                   "timeout {} ms)",
+                   m.server ? "APO '" + m.apo + "' offered as"
+                            : "APO '" + m.herm_topic + "' calls",
+                   m.dds_topic, m.service->name, m.request_topic(),
+                   m.reply_topic(), m.domain, m.timeout.count());
+    else
+      spdlog::info("dds_gateway: '{}' {} DDS {} ({}, domain {}, {}, depth {}, {})",
                  m.herm_topic,
                  m.dir == direction::both       ? "<->"
                  : m.dir == direction::to_dds ? "->"

@@ -32,6 +32,12 @@
 //
 // Bad input: a DDS sample that does not convert, or a HERM value of the
 // wrong type, is dropped whole and counted (gateway_stats), never fatal.
+//
+// Services (ros_services.hpp): a server mapping's requests reach the HERM
+// APO it names (bound by name, rebinding), and its answer goes back as the
+// reply with the request's header; a client mapping's proxy APO
+// (service_client.hpp) calls the DDS service. At most 16 requests wait for
+// an APO to be bound; more are counted as serve_failed.
 
 #include "caf/actor.hpp"
 #include "caf/expected.hpp"

@@ -86,6 +86,32 @@ caf::error field(mapping& m, const std::string& key, const std::string& f,
     if (v != "volatile" && v != "transient_local")
       return fail(key, "expected volatile or transient_local, got '" + v + "'");
     m.transient_local = v == "transient_local";
+  } else if (f == "service") {
+    m.service = find_ros_service(v);
+    if (m.service == nullptr) {
+      std::string known;
+      for (auto& x : ros_services())
+        known += (known.empty() ? "" : ", ") + std::string{x.name};
+      return fail(key, "expected a shipped ROS service type (" + known
+                         + "), got '" + v + "'");
+    }
+  } else if (f == "role") {
+    if (v != "server" && v != "client")
+      return fail(key, "expected server or client, got '" + v + "'");
+    m.server = v == "server";
+  } else if (f == "apo") {
+    if (v.empty() || v.size() > 255)
+      return fail(key, "expected an APO name of 1 to 255 bytes");
+    m.apo = v;
+  } else if (f == "dds_service") {
+    if (v.empty() || v.size() > 240)
+      return fail(key, "expected a DDS service name of 1 to 240 bytes");
+    m.dds_topic = v;
+  } else if (f == "timeout_ms") {
+    uint64_t ms = 0;
+    if (auto err = integer(key, v, 1, 3'600'000, ms))
+      return err;
+    m.timeout = std::chrono::milliseconds(ms);
   } else if (f == "frame_id") {
     if (v.size() > 255)
       return fail(key, "expected a frame id of at most 255 bytes");
@@ -100,7 +126,8 @@ caf::error field(mapping& m, const std::string& key, const std::string& f,
     return fail(key, "unknown field '" + f
                        + "' (expected type, direction, dds_topic, domain, "
                          "reliability, depth, durability, frame_id, "
-                         "field_of_view, min_range, max_range)");
+                         "field_of_view, min_range, max_range; for a service: "
+                         "service, role, apo, dds_service, timeout_ms)");
   }
   return caf::none;
 }
@@ -137,7 +164,10 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
   cfg.max_backlog = static_cast<uint32_t>(backlog);
   // Then one mapping per topic, fields in key order (std::map).
   std::map<std::string, mapping> by_topic;
+  // Which option keys each mapping used, to refuse mixed kinds.
   std::map<std::string, std::vector<std::string>> range_fields;
+  std::map<std::string, std::vector<std::string>> topic_fields;
+  std::map<std::string, std::vector<std::string>> service_fields;
   for (auto& [key, v] : options) {
     auto dot = key.rfind('.');
     if (dot == std::string::npos)
@@ -165,11 +195,37 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
     if (f == "frame_id" || f == "field_of_view" || f == "min_range"
         || f == "max_range")
       range_fields[topic].push_back(key);
+    else if (f == "type" || f == "direction" || f == "dds_topic")
+      topic_fields[topic].push_back(key);
+    else if (f == "role" || f == "apo" || f == "dds_service"
+             || f == "timeout_ms")
+      service_fields[topic].push_back(key);
   }
   for (auto& [topic, m] : by_topic) {
+    if (m.service != nullptr) {
+      if (topic_fields.count(topic) > 0)
+        return fail(topic_fields[topic].front(),
+                    "a service mapping (" + topic + ".service) takes no topic "
+                    "fields (type, direction, dds_topic)");
+      if (range_fields.count(topic) > 0)
+        return fail(range_fields[topic].front(),
+                    "only a sensor_msgs/msg/Range mapping takes this field");
+      if (!m.server && !m.apo.empty())
+        return fail(topic + ".apo", "only a server mapping serves an APO");
+      if (m.dds_topic == "rt/" + topic)
+        m.dds_topic = topic;
+      if (m.apo.empty())
+        m.apo = topic;
+      cfg.mappings.push_back(std::move(m));
+      continue;
+    }
+    if (service_fields.count(topic) > 0)
+      return fail(service_fields[topic].front(),
+                  "only a service mapping (" + topic + ".service) takes this "
+                  "field");
     if (m.type == nullptr)
       return fail(topic + ".type", "missing: every mapping needs its ROS type ("
-                                     + known_types() + ")");
+                                     + known_types() + ") or service");
     if (!is_range(m) && range_fields.count(topic) > 0)
       return fail(range_fields[topic].front(),
                   "only a sensor_msgs/msg/Range mapping takes this field");

@@ -16,12 +16,23 @@
 //   <topic>.durability: volatile | transient_local       (volatile)
 //   <topic>.frame_id / field_of_view / min_range / max_range   (Range only)
 //
+// A service instead (docs/gateway.md, "Services"), `<name>` its ROS name:
+//   <name>.service: example_interfaces/srv/AddTwoInts   required
+//   <name>.role: server | client                         (server)
+//     server: the HERM APO `<name>.apo` (default <name>) is offered as the
+//             DDS service; client: a proxy APO named <name> calls the DDS
+//             service
+//   <name>.dds_service: <name>    the DDS service (rq/<..>Request, rr/<..>Reply)
+//   <name>.timeout_ms: 5000       a call's deadline, either way
+//   <name>.domain / reliability / depth / durability as for topics
+//
 // The defaults are ROS 2's (rclcpp's default QoS profile). <topic> is the
 // HERM topic: everything before the option's last dot. Pure; errors are
 // ec::invalid_config whose text names the option ("options.sonar.depth:
 // expected an integer in [1, 10000], got 'x'"); hermd prefixes file and
 // line.
 
+#include <chrono>
 #include <cstdint>
 #include <map>
 #include <string>
@@ -29,6 +40,7 @@
 
 #include "caf/expected.hpp"
 
+#include "apps/dds_gateway/ros_services.hpp"
 #include "apps/dds_gateway/ros_types.hpp"
 
 namespace herm::dds_gateway {
@@ -45,12 +57,26 @@ struct mapping {
   int32_t depth = 10;
   bool transient_local = false;
   conversion_options conv;
+  // -- a service mapping (type is then nullptr) --
+  const ros_service* service = nullptr;
+  /// Server: HERM APO `apo` offered on DDS; client: DDS service offered to
+  /// HERM as the APO `herm_topic`.
+  bool server = true;
+  std::string apo;
+  std::chrono::milliseconds timeout{5000};
 
   bool to_dds() const {
-    return dir != direction::from_dds;
+    return service == nullptr && dir != direction::from_dds;
   }
   bool from_dds() const {
-    return dir != direction::to_dds;
+    return service == nullptr && dir != direction::to_dds;
+  }
+  /// Service topics: dds_topic holds the service's DDS name.
+  std::string request_topic() const {
+    return "rq/" + dds_topic + "Request";
+  }
+  std::string reply_topic() const {
+    return "rr/" + dds_topic + "Reply";
   }
 };
 

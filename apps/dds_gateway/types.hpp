@@ -70,13 +70,19 @@ struct gateway_stats {
   uint64_t backlog_dropped = 0;
   /// dds_write failures.
   uint64_t write_failed = 0;
+  /// DDS service requests answered by a HERM APO (server mappings).
+  uint64_t served = 0;
+  /// DDS service requests the HERM APO did not answer (not found, error,
+  /// timeout) or whose answer did not convert: no reply is written, the
+  /// DDS client times out, as with a ROS 2 server that fails.
+  uint64_t serve_failed = 0;
 };
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, gateway_stats& s) {
   return f(caf::meta::type_name("herm.gateway_stats"), s.to_dds, s.from_dds,
            s.dds_rejected, s.herm_rejected, s.looped_back, s.backlog_dropped,
-           s.write_failed);
+           s.write_failed, s.served, s.serve_failed);
 }
 
 /// Registers the block below (twist, vector3, gateway_stats).

@@ -1,7 +1,7 @@
 /* A ROS 2 node's view of a HERM robot, with nothing of HERM in it: Cyclone
  * DDS's C API and the types idlc generated from apps/dds_gateway/idl.
  *
- *   dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS
+ *   dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS [CALLS]
  *
  * On domain DOMAIN it subscribes to rt/sonar as
  * sensor_msgs::msg::dds_::Range_ and prints each reading,
@@ -11,9 +11,24 @@
  * until RANGES readings came. Once a reader matches its writer it publishes
  * TWISTS geometry_msgs::msg::dds_::Twist_ on rt/cmd_vel (linear.x = 0.1 i,
  * angular.z = -i) and BAD Range_ samples whose range is NaN on
- * rt/sonar_in, printing "sent twists" and "sent bad". Exits 0 when every
- * reading came and everything was sent, 1 when TIMEOUT_MS passed first,
- * 2 on a usage or DDS error. Restrict it to loopback with CYCLONEDDS_URI. */
+ * rt/sonar_in, printing "sent twists" and "sent bad".
+ *
+ * With CALLS, it is also a ROS 2 service client and server as
+ * rmw_cyclonedds lays them out (rq/<S>Request, rr/<S>Reply, the request
+ * header {guid, seq} first):
+ *  - it calls example_interfaces/srv/AddTwoInts "add_two_ints" CALLS times
+ *    (a = k, b = 10 k for k = 1..CALLS) and prints each reply with its own
+ *    guid, "sum <seq> <sum>";
+ *  - it serves "dds_adder" (sum = a + b, header repeated), printing
+ *    "served <a> <b>";
+ *  - it takes requests of "dds_silent" and never answers them, printing
+ *    "ignored <a> <b>".
+ * It then also waits for all CALLS replies, one dds_adder and one
+ * dds_silent request.
+ *
+ * Exits 0 when everything came and was sent, 1 when TIMEOUT_MS passed
+ * first, 2 on a usage or DDS error. Restrict it to loopback with
+ * CYCLONEDDS_URI. */
 
 #include <math.h>
 #include <stdio.h>
@@ -22,6 +37,7 @@
 #include "dds/dds.h"
 #include "dds/ddsi/ddsi_serdata.h"
 
+#include "example_interfaces/AddTwoInts.h"
 #include "geometry_msgs/Twist.h"
 #include "sensor_msgs/Range.h"
 
@@ -40,11 +56,19 @@ static int matched(dds_entity_t writer) {
          && st.current_count > 0;
 }
 
+static int sub_matched(dds_entity_t reader) {
+  dds_subscription_matched_status_t st;
+  return dds_get_subscription_matched_status(reader, &st) == 0
+         && st.current_count > 0;
+}
+
 int main(int argc, char** argv) {
-  if (argc != 6) {
-    fprintf(stderr, "usage: dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS\n");
+  if (argc != 6 && argc != 7) {
+    fprintf(stderr,
+            "usage: dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS [CALLS]\n");
     return 2;
   }
+  int calls = argc == 7 ? atoi(argv[6]) : 0;
   dds_domainid_t domain = (dds_domainid_t) atoi(argv[1]);
   int want_ranges = atoi(argv[2]);
   int twists = atoi(argv[3]);
@@ -77,6 +101,54 @@ int main(int argc, char** argv) {
     "topic rt/sonar_in");
   dds_entity_t bad_writer = check(dds_create_writer(pp, sonar_in, qos, NULL),
                                   "writer rt/sonar_in");
+  /* Services: a client of add_two_ints, the server of dds_adder, a
+   * silent server of dds_silent. */
+  const dds_topic_descriptor_t* rq_desc
+    = &example_interfaces_srv_dds__AddTwoInts_Request__desc;
+  const dds_topic_descriptor_t* rr_desc
+    = &example_interfaces_srv_dds__AddTwoInts_Response__desc;
+  dds_entity_t call_writer = 0, reply_reader = 0, adder_reader = 0,
+               adder_writer = 0, silent_reader = 0;
+  if (calls > 0) {
+    call_writer = check(
+      dds_create_writer(pp, check(dds_create_topic(pp, rq_desc,
+                                                   "rq/add_two_intsRequest",
+                                                   NULL, NULL),
+                                  "topic rq/add_two_intsRequest"),
+                        qos, NULL),
+      "writer rq/add_two_intsRequest");
+    reply_reader = check(
+      dds_create_reader(pp, check(dds_create_topic(pp, rr_desc,
+                                                   "rr/add_two_intsReply",
+                                                   NULL, NULL),
+                                  "topic rr/add_two_intsReply"),
+                        qos, NULL),
+      "reader rr/add_two_intsReply");
+    adder_reader = check(
+      dds_create_reader(pp, check(dds_create_topic(pp, rq_desc,
+                                                   "rq/dds_adderRequest",
+                                                   NULL, NULL),
+                                  "topic rq/dds_adderRequest"),
+                        qos, NULL),
+      "reader rq/dds_adderRequest");
+    adder_writer = check(
+      dds_create_writer(pp, check(dds_create_topic(pp, rr_desc,
+                                                   "rr/dds_adderReply", NULL,
+                                                   NULL),
+                                  "topic rr/dds_adderReply"),
+                        qos, NULL),
+      "writer rr/dds_adderReply");
+    silent_reader = check(
+      dds_create_reader(pp, check(dds_create_topic(pp, rq_desc,
+                                                   "rq/dds_silentRequest",
+                                                   NULL, NULL),
+                                  "topic rq/dds_silentRequest"),
+                        qos, NULL),
+      "reader rq/dds_silentRequest");
+  }
+  dds_instance_handle_t my_guid = 0;
+  if (calls > 0)
+    dds_get_instance_handle(call_writer, &my_guid);
   dds_delete_qos(qos);
 
   dds_entity_t ws = check(dds_create_waitset(pp), "waitset");
@@ -87,9 +159,11 @@ int main(int argc, char** argv) {
   fflush(stdout);
 
   int ranges = 0, sent_twists = 0, sent_bad = 0, encoding_shown = 0;
+  int sent_calls = 0, replies = 0, served = 0, ignored = 0;
   dds_time_t next_send = 0;
   while (dds_time() < deadline) {
-    if (ranges >= want_ranges && sent_twists >= twists && sent_bad >= bad)
+    if (ranges >= want_ranges && sent_twists >= twists && sent_bad >= bad
+        && replies >= calls && (calls == 0 || (served > 0 && ignored > 0)))
       break;
     /* Send one of each due every 50 ms once the other side listens. */
     if (dds_time() >= next_send) {
@@ -101,6 +175,14 @@ int main(int argc, char** argv) {
           printf("sent twists %d\n", sent_twists);
           fflush(stdout);
         }
+      }
+      /* Both ways matched: a reply has a reader to go to. */
+      if (sent_calls < calls && matched(call_writer)
+          && sub_matched(reply_reader)) {
+        example_interfaces_srv_dds__AddTwoInts_Request_ rq
+          = {{my_guid, sent_calls + 1}, sent_calls + 1, 10 * (sent_calls + 1)};
+        if (dds_write(call_writer, &rq) == 0)
+          ++sent_calls;
       }
       if (sent_bad < bad && matched(bad_writer)) {
         sensor_msgs_msg_dds__Range_ r = {{{0, 0}, "bad"}, 0, 0.5f, 0.0f, 1.0f,
@@ -137,10 +219,53 @@ int main(int argc, char** argv) {
       }
       ddsi_serdata_unref(cdr[i]);
     }
+    if (calls > 0) {
+      void* s[4] = {NULL};
+      dds_sample_info_t si[4];
+      int k = dds_take(reply_reader, s, si, 4, 4);
+      for (int i = 0; i < k; ++i) {
+        example_interfaces_srv_dds__AddTwoInts_Response_* r = s[i];
+        if (si[i].valid_data && r->header.guid == my_guid) {
+          printf("sum %lld %lld\n", (long long) r->header.seq,
+                 (long long) r->sum);
+          ++replies;
+        }
+      }
+      if (k > 0)
+        dds_return_loan(reply_reader, s, k);
+      s[0] = NULL;
+      k = dds_take(adder_reader, s, si, 4, 4);
+      for (int i = 0; i < k; ++i) {
+        example_interfaces_srv_dds__AddTwoInts_Request_* q = s[i];
+        if (!si[i].valid_data)
+          continue;
+        example_interfaces_srv_dds__AddTwoInts_Response_ r
+          = {q->header, q->a + q->b};
+        if (dds_write(adder_writer, &r) == 0) {
+          printf("served %lld %lld\n", (long long) q->a, (long long) q->b);
+          ++served;
+        }
+      }
+      if (k > 0)
+        dds_return_loan(adder_reader, s, k);
+      s[0] = NULL;
+      k = dds_take(silent_reader, s, si, 4, 4);
+      for (int i = 0; i < k; ++i) {
+        example_interfaces_srv_dds__AddTwoInts_Request_* q = s[i];
+        if (si[i].valid_data) {
+          printf("ignored %lld %lld\n", (long long) q->a, (long long) q->b);
+          ++ignored;
+        }
+      }
+      if (k > 0)
+        dds_return_loan(silent_reader, s, k);
+    }
     fflush(stdout);
   }
-  int ok = ranges >= want_ranges && sent_twists >= twists && sent_bad >= bad;
-  printf("done ranges %d twists %d bad %d\n", ranges, sent_twists, sent_bad);
+  int ok = ranges >= want_ranges && sent_twists >= twists && sent_bad >= bad
+           && replies >= calls && (calls == 0 || (served > 0 && ignored > 0));
+  printf("done ranges %d twists %d bad %d replies %d served %d ignored %d\n",
+         ranges, sent_twists, sent_bad, replies, served, ignored);
   fflush(stdout);
   dds_delete(pp);
   return ok ? 0 : 1;

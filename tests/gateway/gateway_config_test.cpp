@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+
 #include "actors/runtime/error.hpp"
 #include "apps/dds_gateway/gateway_config.hpp"
 
@@ -131,4 +133,63 @@ TEST(gateway_config, mappings_are_bounded) {
   EXPECT_NE(error_of(o).find("more than 256 mappings"), std::string::npos);
   o.erase("t0.type");
   EXPECT_EQ(error_of(o), "");
+}
+
+TEST(gateway_config, a_service_mapping_serves_its_namesake_apo_by_default) {
+  auto cfg = parse_gateway_options({
+    {"add_two_ints.service", "example_interfaces/srv/AddTwoInts"},
+    {"calc.service", "example_interfaces/srv/AddTwoInts"},
+    {"calc.role", "client"},
+    {"calc.dds_service", "robot1/calc"},
+    {"calc.timeout_ms", "250"},
+    {"sum.service", "example_interfaces/srv/AddTwoInts"},
+    {"sum.apo", "adder"},
+  });
+  ASSERT_TRUE(cfg) << herm::render(cfg.error());
+  ASSERT_EQ(cfg->mappings.size(), 3u);
+  auto& add = cfg->mappings[0];
+  EXPECT_STREQ(add.service->name, "example_interfaces/srv/AddTwoInts");
+  EXPECT_EQ(add.type, nullptr);
+  EXPECT_TRUE(add.server);
+  EXPECT_EQ(add.apo, "add_two_ints");
+  EXPECT_EQ(add.request_topic(), "rq/add_two_intsRequest");
+  EXPECT_EQ(add.reply_topic(), "rr/add_two_intsReply");
+  EXPECT_EQ(add.timeout, std::chrono::milliseconds(5000));
+  EXPECT_FALSE(add.to_dds() || add.from_dds()); // no topic of its own
+  auto& calc = cfg->mappings[1];
+  EXPECT_FALSE(calc.server);
+  EXPECT_EQ(calc.request_topic(), "rq/robot1/calcRequest");
+  EXPECT_EQ(calc.timeout, std::chrono::milliseconds(250));
+  EXPECT_EQ(cfg->mappings[2].apo, "adder");
+}
+
+TEST(gateway_config, service_and_topic_fields_do_not_mix) {
+  struct {
+    options opts;
+    const char* text;
+  } cases[] = {
+    {{{"s.service", "std_srvs/srv/Trigger"}},
+     "options.s.service: expected a shipped ROS service type "
+     "(example_interfaces/srv/AddTwoInts), got 'std_srvs/srv/Trigger'"},
+    {{{"s.service", "example_interfaces/srv/AddTwoInts"}, {"s.role", "both"}},
+     "options.s.role: expected server or client, got 'both'"},
+    {{{"s.service", "example_interfaces/srv/AddTwoInts"},
+      {"s.direction", "both"}},
+     "options.s.direction: a service mapping (s.service) takes no topic "
+     "fields"},
+    {{{"s.service", "example_interfaces/srv/AddTwoInts"}, {"s.role", "client"},
+      {"s.apo", "x"}},
+     "options.s.apo: only a server mapping serves an APO"},
+    {{{"s.type", "std_msgs/msg/Int32"}, {"s.timeout_ms", "5"}},
+     "options.s.timeout_ms: only a service mapping (s.service) takes this "
+     "field"},
+    {{{"s.service", "example_interfaces/srv/AddTwoInts"},
+      {"s.timeout_ms", "0"}},
+     "options.s.timeout_ms: expected an integer in [1, 3600000], got '0'"},
+  };
+  for (auto& c : cases) {
+    auto text = error_of(c.opts);
+    EXPECT_NE(text.find(c.text), std::string::npos)
+      << "expected '" << c.text << "' in '" << text << "'";
+  }
 }

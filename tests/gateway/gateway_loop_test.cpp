@@ -209,13 +209,17 @@ TEST_F(gateway_loop_test, a_herm_value_of_the_wrong_type_is_dropped_and_counted)
            && s.current_count > 0;
   }));
   const module_handles& h = module_.handles();
-  caf::anon_send(h.apps, atom::publish_v, std::string{"level"},
-                 caf::make_message(2.5)); // a double, not an int32_t
-  caf::anon_send(h.apps, atom::publish_v, std::string{"level"},
-                 caf::make_message(int32_t{7}));
-  ASSERT_TRUE(eventually([&] { return stats().to_dds == 1; }));
-  auto st = stats();
-  EXPECT_EQ(st.herm_rejected, 1u);
+  auto publish = [&](caf::message x) {
+    caf::anon_send(h.apps, atom::publish_v, std::string{"level"},
+                   std::move(x));
+  };
+  // The gateway subscribes once it runs: publish until a value crossed.
+  ASSERT_TRUE(eventually([&] {
+    publish(caf::make_message(int32_t{7}));
+    return stats().to_dds > 0;
+  }));
+  publish(caf::make_message(2.5)); // a double, not an int32_t
+  publish(caf::make_message(int32_t{8}));
   std::vector<int32_t> got;
   ASSERT_TRUE(eventually([&] {
     void* samples[4] = {nullptr};
@@ -226,7 +230,11 @@ TEST_F(gateway_loop_test, a_herm_value_of_the_wrong_type_is_dropped_and_counted)
         got.push_back(static_cast<std_msgs_msg_dds__Int32_*>(samples[i])->data);
     if (n > 0)
       dds_return_loan(reader, samples, n);
-    return !got.empty();
+    return !got.empty() && got.back() == 8;
   }));
-  EXPECT_EQ(got, std::vector<int32_t>{7});
+  // The 7s, then the 8; the double, handled before the 8, was dropped and
+  // counted and never reached DDS.
+  for (size_t i = 0; i + 1 < got.size(); ++i)
+    EXPECT_EQ(got[i], 7);
+  EXPECT_EQ(stats().herm_rejected, 1u);
 }

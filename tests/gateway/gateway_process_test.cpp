@@ -9,7 +9,9 @@
 // readings the node publishes two hops away; the node receives the
 // geometry_msgs::msg::dds_::Twist_ the peer publishes on rt/cmd_vel; Range
 // samples with a NaN range on rt/sonar_in are dropped and counted by the
-// gateway, never forwarded. Every wait is bounded; nothing asserts on
+// gateway, never forwarded. The peer calls the node's APO as a ROS 2
+// service, and the node calls the peer's service through the gateway's
+// proxy APO, with HERM's typed errors for a silent and a missing server. Every wait is bounded; nothing asserts on
 // timing.
 
 #include <gtest/gtest.h>
@@ -95,7 +97,8 @@ protected:
 
 } // namespace
 
-TEST_F(gateway_process_test, a_dds_peer_sees_sonar_two_hops_away_and_commands_the_robot) {
+TEST_F(gateway_process_test,
+       a_dds_peer_sees_sonar_two_hops_away_commands_the_robot_and_calls_services) {
   auto p_robot = free_udp_port();
   auto p_relay = free_udp_port();
   auto p_node = free_udp_port();
@@ -110,7 +113,18 @@ TEST_F(gateway_process_test, a_dds_peer_sees_sonar_two_hops_away_and_commands_th
         "      cmd_vel.type: geometry_msgs/msg/Twist\n"
         "      cmd_vel.direction: from_dds\n"
         "      sonar_in.type: sensor_msgs/msg/Range\n"
-        "      sonar_in.direction: from_dds\n");
+        "      sonar_in.direction: from_dds\n"
+        // The node's APO adder as the DDS service add_two_ints; DDS
+        // services as the APOs dds_adder, dds_silent and dds_nobody.
+        "      add_two_ints.service: example_interfaces/srv/AddTwoInts\n"
+        "      add_two_ints.apo: adder\n"
+        "      dds_adder.service: example_interfaces/srv/AddTwoInts\n"
+        "      dds_adder.role: client\n"
+        "      dds_silent.service: example_interfaces/srv/AddTwoInts\n"
+        "      dds_silent.role: client\n"
+        "      dds_silent.timeout_ms: 1000\n"
+        "      dds_nobody.service: example_interfaces/srv/AddTwoInts\n"
+        "      dds_nobody.role: client\n");
   // The relay has a channel towards each side: a flood is relayed on the
   // channels it did not come in on.
   auto p_relay2 = free_udp_port();
@@ -132,9 +146,9 @@ TEST_F(gateway_process_test, a_dds_peer_sees_sonar_two_hops_away_and_commands_th
   // one per second).
   ASSERT_TRUE(sent_at_least(node, 1, 30s)) << node.output();
   ASSERT_TRUE(sent_at_least(node, first_sent_ + 20, 30s)) << node.output();
-  // 8 readings, 5 twists, 3 bad samples; within 40 s.
+  // 8 readings, 5 twists, 3 bad samples, 3 service calls; within 40 s.
   child_process peer{{DDS_PEER_BIN, std::to_string(domain_), "8", "5", "3",
-                      "40000"}};
+                      "40000", "3"}};
   auto status = peer.wait(60s);
   auto out = peer.output();
   ASSERT_EQ(status, 0) << out << "\n--- robot:\n" << robot.output()
@@ -184,6 +198,25 @@ TEST_F(gateway_process_test, a_dds_peer_sees_sonar_two_hops_away_and_commands_th
     << robot.output();
   // ... and nothing half-built reached HERM.
   EXPECT_EQ(node.output().find("sonar_in"), std::string::npos) << node.output();
+
+  // The peer called the node's APO adder, two hops away, as the ROS 2
+  // service add_two_ints, and got each reply with its own request header.
+  for (auto want : {"sum 1 11\n", "sum 2 22\n", "sum 3 33\n"})
+    EXPECT_NE(out.find(want), std::string::npos) << want << out;
+  // The node called the peer's DDS service through the proxy APO
+  // dds_adder; a server that never answers is HERM's timeout, a service
+  // nobody serves HERM's not_found.
+  EXPECT_TRUE(node.wait_for_line("call dds_adder 15", 20s)) << node.output();
+  EXPECT_TRUE(node.wait_for_line(
+    "call dds_silent error herm.timeout: DDS service 'dds_silent' did not "
+    "answer in 1000 ms",
+    20s))
+    << node.output();
+  EXPECT_TRUE(node.wait_for_line("call dds_nobody error herm.not_found: DDS "
+                                 "service 'dds_nobody' (domain "
+                                   + std::to_string(domain_) + "): no server",
+                                 20s))
+    << node.output();
 }
 
 TEST_F(gateway_process_test, hermd_check_names_file_line_and_option_of_a_bad_mapping) {

@@ -5,12 +5,18 @@
 //  - subscribes to "cmd_vel" and "sonar_in" and prints what comes:
 //      twist <linear.x> <angular.z>
 //      sonar_in <seq> <distance_mm>
+//  - serves the APO "adder": a request (int64_t a, int64_t b) is answered
+//    with a + b, and
+//  - every 500 ms calls each of the APOs dds_adder, dds_silent and
+//    dds_nobody (bound by name, one call in flight per name) with (7, 8)
+//    and prints "call <name> <sum>" or "call <name> error <error>".
 //
 //   herm_sonar_node PORT PEER_PORT SECONDS
 //
 // Prints "started" once the module runs; ends after SECONDS.
 
 #include <chrono>
+#include <map>
 #include <cstdio>
 #include <string>
 #include <thread>
@@ -20,6 +26,7 @@
 #include "caf/event_based_actor.hpp"
 #include "caf/scoped_actor.hpp"
 #include "caf/send.hpp"
+#include "caf/stateful_actor.hpp"
 
 #include "actors/module.hpp"
 #include "actors/runtime/error.hpp"
@@ -60,6 +67,48 @@ caf::behavior printer(caf::event_based_actor*) {
   };
 }
 
+caf::behavior adder(caf::event_based_actor*) {
+  return {
+    [](int64_t a, int64_t b) { return a + b; },
+  };
+}
+
+struct caller_state {
+  static inline const char* name = "herm.test.caller";
+  std::map<std::string, bool> busy;
+};
+
+void call_once(caf::stateful_actor<caller_state>* self, app_support_actor apps,
+               const std::string& name) {
+  self->state.busy[name] = true;
+  auto done = [self, name](const std::string& what) {
+    std::printf("call %s %s\n", name.c_str(), what.c_str());
+    std::fflush(stdout);
+    self->state.busy[name] = false;
+  };
+  self->request(apps, 5s, atom::bind_v, bind_request{query_by::name, name, 500})
+    .then(
+      [self, done](caf::actor& proxy) {
+        self->request(proxy, 10s, int64_t{7}, int64_t{8})
+          .then([done](int64_t sum) { done(std::to_string(sum)); },
+                [done](caf::error& err) { done("error " + render(err)); });
+      },
+      [done](caf::error& err) { done("error " + render(err)); });
+}
+
+caf::behavior caller(caf::stateful_actor<caller_state>* self,
+                     app_support_actor apps) {
+  self->send(self, atom::tick_v);
+  return {
+    [self, apps](atom::tick) {
+      self->delayed_send(self, 500ms, atom::tick_v);
+      for (auto name : {"dds_adder", "dds_silent", "dds_nobody"})
+        if (!self->state.busy[name])
+          call_once(self, apps, name);
+    },
+  };
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -88,6 +137,10 @@ int main(int argc, char** argv) {
   for (auto topic : {"cmd_vel", "sonar_in"})
     caf::anon_send(h.apps, atom::subscribe_v, std::string{topic}, pr);
   auto pub = sys.spawn(publisher, h.apps);
+  auto add = sys.spawn(adder);
+  caf::anon_send(h.apps, atom::add_v, std::string{"adder"},
+                 std::string{"herm.adder"}, add);
+  auto calls = sys.spawn(caller, h.apps);
   std::printf("started\n");
   std::fflush(stdout);
   // Every second, what the module's topics did (for a failing test's log).
@@ -109,6 +162,8 @@ int main(int argc, char** argv) {
         [](caf::error&) {});
   }
   caf::anon_send_exit(pub, caf::exit_reason::user_shutdown);
+  caf::anon_send_exit(add, caf::exit_reason::user_shutdown);
+  caf::anon_send_exit(calls, caf::exit_reason::user_shutdown);
   caf::anon_send_exit(pr, caf::exit_reason::user_shutdown);
   return 0;
 }

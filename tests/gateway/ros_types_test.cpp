@@ -1,16 +1,19 @@
-// The shipped ROS 2 types: their names on the wire (rmw_cyclonedds's), and
-// each conversion both ways, bad input refused whole.
+// The shipped ROS 2 types and services: their names on the wire
+// (rmw_cyclonedds's), and each conversion both ways, bad input refused whole.
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 #include <vector>
 
+#include "apps/dds_gateway/ros_services.hpp"
 #include "apps/dds_gateway/ros_types.hpp"
 #include "apps/dds_gateway/types.hpp"
 
+#include "example_interfaces/AddTwoInts.h"
 #include "geometry_msgs/Twist.h"
 #include "sensor_msgs/Range.h"
 #include "std_msgs/Basic.h"
@@ -179,4 +182,49 @@ TEST(ros_types, a_herm_value_of_another_type_is_refused) {
   geometry_msgs_msg_dds__Twist_ t;
   EXPECT_TRUE(to("geometry_msgs/msg/Twist",
                  caf::make_message(twist{}, twist{}), t));
+}
+
+// -- services --------------------------------------------------------------------
+
+TEST(ros_services, add_two_ints_travels_as_rmw_cyclonedds_lays_it_out) {
+  auto* s = find_ros_service("example_interfaces/srv/AddTwoInts");
+  ASSERT_NE(s, nullptr);
+  EXPECT_STREQ(s->request_descriptor->m_typename,
+               "example_interfaces::srv::dds_::AddTwoInts_Request_");
+  EXPECT_STREQ(s->reply_descriptor->m_typename,
+               "example_interfaces::srv::dds_::AddTwoInts_Response_");
+  // The request header (two 64-bit words) comes first.
+  example_interfaces_srv_dds__AddTwoInts_Request_ rq{};
+  EXPECT_EQ(offsetof(example_interfaces_srv_dds__AddTwoInts_Request_, a), 16u);
+  ASSERT_FALSE(s->request_to_dds(caf::make_message(int64_t{2}, int64_t{3}),
+                                 request_header{0xABCD, 7}, &rq));
+  EXPECT_EQ(rq.header.guid, 0xABCDu);
+  EXPECT_EQ(rq.header.seq, 7);
+  request_header h;
+  auto req = s->request_from_dds(&rq, h);
+  ASSERT_TRUE(req);
+  EXPECT_EQ(h.guid, 0xABCDu);
+  EXPECT_EQ(h.seq, 7);
+  EXPECT_TRUE((req->match_elements<int64_t, int64_t>()));
+  example_interfaces_srv_dds__AddTwoInts_Response_ rr{};
+  ASSERT_FALSE(s->reply_to_dds(caf::make_message(int64_t{5}), h, &rr));
+  EXPECT_EQ(rr.sum, 5);
+  EXPECT_EQ(rr.header.seq, 7); // the reply repeats its request's header
+  request_header back;
+  auto resp = s->reply_from_dds(&rr, back);
+  ASSERT_TRUE(resp);
+  EXPECT_EQ(back.guid, 0xABCDu);
+  EXPECT_EQ(resp->get_as<int64_t>(0), 5);
+}
+
+TEST(ros_services, herm_messages_of_other_types_are_refused) {
+  auto* s = find_ros_service("example_interfaces/srv/AddTwoInts");
+  ASSERT_NE(s, nullptr);
+  example_interfaces_srv_dds__AddTwoInts_Request_ rq{};
+  EXPECT_EQ(s->request_to_dds(caf::make_message(int32_t{2}, int32_t{3}), {}, &rq),
+            herm::ec::invalid_parameter);
+  example_interfaces_srv_dds__AddTwoInts_Response_ rr{};
+  EXPECT_EQ(s->reply_to_dds(caf::make_message(std::string{"5"}), {}, &rr),
+            herm::ec::invalid_parameter);
+  EXPECT_EQ(find_ros_service("example_interfaces/srv/AddThreeInts"), nullptr);
 }
