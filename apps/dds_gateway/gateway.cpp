@@ -4,6 +4,7 @@
 #include <deque>
 #include <map>
 #include <memory>
+#include <stdexcept>
 
 #include <spdlog/spdlog.h>
 
@@ -15,6 +16,7 @@
 
 #include "actors/runtime/atoms.hpp"
 #include "actors/runtime/error.hpp"
+#include "actors/type_description.hpp"
 #include "actors/unexpected.hpp"
 #include "apps/dds_gateway/service_client.hpp"
 
@@ -564,6 +566,17 @@ caf::expected<caf::actor> spawn_dds_gateway(caf::actor_system& sys,
 
 void add_gateway_types(caf::actor_system_config& cfg) {
   cfg.add_message_types<caf::id_block::herm_gateway>();
+  // Field names, so that hermctl prints and parses them by name (a twist
+  // on cmd_vel with `hermctl topic echo`).
+  for (auto err :
+       {describe_type<vector3>("herm::dds_gateway::vector3", {"x", "y", "z"}),
+        describe_type<twist>("herm::dds_gateway::twist", {"linear", "angular"}),
+        describe_type<gateway_stats>(
+          "herm::dds_gateway::gateway_stats",
+          {"to_dds", "from_dds", "dds_rejected", "herm_rejected", "looped_back",
+           "backlog_dropped", "write_failed", "served", "serve_failed"})})
+    if (err)
+      throw std::logic_error(render(err));
 }
 
 } // namespace herm::dds_gateway

@@ -85,7 +85,8 @@ typename Inspector::result_type inspect(Inspector& f, gateway_stats& s) {
            s.write_failed, s.served, s.serve_failed);
 }
 
-/// Registers the block below (twist, vector3, gateway_stats).
+/// Registers the block below (twist, vector3, gateway_stats) and describes
+/// the types' fields (actors/type_description.hpp) for hermctl.
 void add_gateway_types(caf::actor_system_config& cfg);
 
 } // namespace herm::dds_gateway

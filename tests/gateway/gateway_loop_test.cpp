@@ -23,6 +23,7 @@
 
 #include "actors/module.hpp"
 #include "actors/runtime/system.hpp"
+#include "actors/type_description.hpp"
 #include "apps/dds_gateway/gateway.hpp"
 
 #include "std_msgs/Basic.h"
@@ -237,4 +238,14 @@ TEST_F(gateway_loop_test, a_herm_value_of_the_wrong_type_is_dropped_and_counted)
   for (size_t i = 0; i + 1 < got.size(); ++i)
     EXPECT_EQ(got[i], 7);
   EXPECT_EQ(stats().herm_rejected, 1u);
+}
+
+TEST_F(gateway_loop_test, the_gateway_types_are_described_for_tools) {
+  // add_gateway_types ran in the fixture's set-up.
+  auto d = find_description("herm::dds_gateway::twist");
+  ASSERT_TRUE(d);
+  ASSERT_EQ(d->fields.size(), 2u);
+  EXPECT_EQ(d->fields[0].name, "linear");
+  EXPECT_EQ(d->fields[1].name, "angular");
+  EXPECT_TRUE(find_description("herm::dds_gateway::vector3"));
 }
