@@ -49,6 +49,8 @@ enum class reads { topic, requests, replies };
 struct reader_ctx {
   /// The gateway, or a client mapping's proxy (replies).
   caf::weak_actor_ptr target;
+  /// The gateway: counts what does not convert.
+  caf::weak_actor_ptr gateway;
   reads what = reads::topic;
   uint32_t index = 0;
   const mapping* m = nullptr;
@@ -109,10 +111,15 @@ void hand_over(reader_ctx* c, const caf::actor& to, const void* sample) {
       }
       break;
   }
-  if (v)
+  if (v) {
     caf::anon_send(to, dds_in_atom::value, c->index, std::move(*v));
+    return;
+  }
+  // Counted by the gateway, whoever the sample was for.
+  if (auto gw = caf::actor_cast<caf::actor>(c->gateway.lock()))
+    caf::anon_send(gw, reject_atom::value, c->index, render(v.error()));
   else
-    caf::anon_send(to, reject_atom::value, c->index, render(v.error()));
+    c->backlog->fetch_sub(1);
 }
 
 /// Whether a reply sample is for this client (others' are not taken up).
@@ -175,9 +182,11 @@ dds_qos_t* make_qos(const mapping& m) {
 /// `target`.
 dds_entity_t open_reader(bridge& b, size_t i, dds_entity_t pp,
                          dds_entity_t topic, const dds_qos_t* qos, reads what,
-                         const caf::actor& target, uint64_t guid = 0) {
+                         const caf::actor& target, const caf::actor& gw,
+                         uint64_t guid = 0) {
   auto c = std::make_unique<reader_ctx>();
   c->target = caf::actor_cast<caf::weak_actor_ptr>(target);
+  c->gateway = caf::actor_cast<caf::weak_actor_ptr>(gw);
   c->what = what;
   c->index = static_cast<uint32_t>(i);
   c->m = &b.cfg.mappings[i];
@@ -213,7 +222,7 @@ caf::error open_service(bridge& b, size_t i, dds_entity_t pp,
     b.writers[i] = dds_create_writer(pp, rr, qos, nullptr);
     if (b.writers[i] < 0)
       return dds_failure(where + ", reply writer", b.writers[i]);
-    b.readers[i] = open_reader(b, i, pp, rq, qos, reads::requests, gw);
+    b.readers[i] = open_reader(b, i, pp, rq, qos, reads::requests, gw, gw);
     if (b.readers[i] < 0)
       return dds_failure(where + ", request reader", b.readers[i]);
     return caf::none;
@@ -225,7 +234,7 @@ caf::error open_service(bridge& b, size_t i, dds_entity_t pp,
   dds_get_instance_handle(b.writers[i], &guid);
   b.clients[i] = spawn_service_client(sys, m, b.writers[i], guid, b.backlog);
   b.readers[i] = open_reader(b, i, pp, rr, qos, reads::replies, b.clients[i],
-                             guid);
+                             gw, guid);
   if (b.readers[i] < 0)
     return dds_failure(where + ", reply reader", b.readers[i]);
   return caf::none;
@@ -266,7 +275,7 @@ caf::error open_dds(bridge& b, const caf::actor& gw, caf::actor_system& sys) {
     }
     if (m.from_dds()) {
       b.readers[i] = open_reader(b, i, p->second, topic, qos.get(),
-                                 reads::topic, gw);
+                                 reads::topic, gw, gw);
       if (b.readers[i] < 0)
         return dds_failure(where + ", reader", b.readers[i]);
     }
@@ -301,8 +310,11 @@ struct held_request {
 /// (and again after a failure); requests wait for it, at most max_held.
 struct served_apo {
   static constexpr size_t max_held = 16;
+  /// Requests of one mapping the APO has not answered yet, at most.
+  static constexpr size_t max_in_flight = 64;
   caf::actor proxy;
   bool binding = false;
+  size_t in_flight = 0;
   std::deque<held_request> held;
 };
 
@@ -352,11 +364,18 @@ void serve_failed(gateway_actor* self, const mapping& m,
 void serve(gateway_actor* self, uint32_t i, request_header h,
            caf::message req) {
   auto& m = self->state.dds->cfg.mappings[i];
-  auto proxy = self->state.served[i].proxy;
+  auto& sv = self->state.served[i];
+  if (sv.in_flight >= served_apo::max_in_flight) {
+    serve_failed(self, m, std::to_string(served_apo::max_in_flight)
+                            + " requests in flight already");
+    return;
+  }
+  ++sv.in_flight;
   m.service->call(
-    self, proxy, m.timeout, std::move(req),
+    self, sv.proxy, m.timeout, std::move(req),
     [self, i, h](caf::expected<caf::message> resp) {
       auto& st = self->state;
+      --st.served[i].in_flight;
       auto& mi = st.dds->cfg.mappings[i];
       if (!resp) {
         serve_failed(self, mi, render(resp.error()));

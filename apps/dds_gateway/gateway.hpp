@@ -36,8 +36,9 @@
 // Services (ros_services.hpp): a server mapping's requests reach the HERM
 // APO it names (bound by name, rebinding), and its answer goes back as the
 // reply with the request's header; a client mapping's proxy APO
-// (service_client.hpp) calls the DDS service. At most 16 requests wait for
-// an APO to be bound; more are counted as serve_failed.
+// (service_client.hpp) calls the DDS service. Per server mapping, at most
+// 16 requests wait for the APO to be bound and 64 for its answers; more are
+// counted as serve_failed.
 
 #include "caf/actor.hpp"
 #include "caf/expected.hpp"
