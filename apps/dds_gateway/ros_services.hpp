@@ -13,8 +13,8 @@
 // reply. example_interfaces/srv/AddTwoInts is the request (int64_t a,
 // int64_t b) answered with an int64_t sum.
 
-#include <cstdint>
 #include <chrono>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>

@@ -36,7 +36,6 @@
 #include "caf/actor_system.hpp"
 #include "caf/actor_system_config.hpp"
 #include "caf/event_based_actor.hpp"
-#include "caf/scoped_actor.hpp"
 #include "caf/send.hpp"
 
 #include "actors/module.hpp"
