@@ -903,8 +903,8 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       return caf::unit;
     },
     [self](atom::publish, std::string& topic,
-           byte_buffer& payload) -> caf::result<void> {
-      if (auto err = on_publish_raw(self, topic, payload))
+           raw_payload& payload) -> caf::result<void> {
+      if (auto err = on_publish_raw(self, topic, payload.bytes))
         return err;
       return caf::unit;
     },

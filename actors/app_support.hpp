@@ -156,6 +156,17 @@ typename Inspector::result_type inspect(Inspector& f, topic_sample& x) {
            x.time, x.payload);
 }
 
+/// A value of a topic already marshalled (docs/protocol.md, "APO
+/// payloads"): what hermctl's topic pub and play publish.
+struct raw_payload {
+  byte_buffer bytes;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, raw_payload& x) {
+  return f(caf::meta::type_name("raw_payload"), x.bytes);
+}
+
 /// One topic as one module sees it (hermctl topic list).
 struct topic_info {
   std::string topic;
@@ -320,7 +331,7 @@ using app_support_actor = caf::typed_actor<
   /// Local subscribers get it as a message when this process knows its
   /// types. Errors: ec::invalid_parameter (topic, not an APO payload),
   /// ec::packet_too_large (over max_message).
-  caf::replies_to<atom::publish, std::string, byte_buffer>::with<void>,
+  caf::replies_to<atom::publish, std::string, raw_payload>::with<void>,
   /// The topics this module publishes or subscribes to.
   caf::replies_to<atom::get, atom::topics>::with<std::vector<topic_info>>,
   caf::replies_to<atom::get, atom::stats>::with<app_support_stats>,

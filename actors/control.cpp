@@ -19,6 +19,7 @@
 
 #include "caf/actor_cast.hpp"
 #include "caf/actor_system.hpp"
+#include "caf/event_based_actor.hpp"
 #include "caf/sec.hpp"
 #include "caf/stateful_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
@@ -53,9 +54,10 @@ struct control_state {
   /// "yes" once registered as an APO, else why not (other modules cannot
   /// reach a service that is not registered).
   std::string registered = "pending";
-  /// Proxies of other modules' control services; an entry is dropped when a
-  /// request through it fails.
+  /// Proxies of other modules' control services (and of their read-only
+  /// herm.info APOs); an entry is dropped when a request through it fails.
   std::map<module_id, caf::actor> proxies;
+  std::map<module_id, caf::actor> info_proxies;
 };
 
 using control_impl = control_actor::stateful_pointer<control_state>;
@@ -88,13 +90,17 @@ void with_self_id(control_impl self, ms timeout, reply_promise rp,
 /// Finds the control service of `target`: ourselves, a cached proxy, a
 /// remote APO already in the application table, or one discovered now.
 void resolve(control_impl self, module_id target, module_id self_id,
-             ms timeout, std::function<void(caf::expected<caf::actor>)> next) {
+             ms timeout, std::function<void(caf::expected<caf::actor>)> next,
+             bool info = false) {
   if (target == self_id) {
     next(caf::actor_cast<caf::actor>(self));
     return;
   }
   auto& st = self->state;
-  if (auto i = st.proxies.find(target); i != st.proxies.end()) {
+  auto& proxies = info ? st.info_proxies : st.proxies;
+  const std::string apo_name = info ? info_apo_name : control_apo_name;
+  const std::string apo_type = info ? info_apo_type : control_apo_type;
+  if (auto i = proxies.find(target); i != proxies.end()) {
     next(i->second);
     return;
   }
@@ -102,26 +108,29 @@ void resolve(control_impl self, module_id target, module_id self_id,
     return make_error(app_ec::not_found, "unknown module " + to_hex(target)
                                        + " (not reachable or no control service)");
   };
-  auto bind = [self, target, timeout, next](apo_ref ref) {
-    // Remote control travels signed in a keyed network (apo_access).
+  auto bind = [self, target, timeout, next, info](apo_ref ref) {
+    // Remote control travels signed in a keyed network (apo_access); the
+    // read-only herm.info is open.
     self->request(self->state.m.apps, timeout, atom::bind_v, ref,
-                  apo_access::signed_only)
+                  info ? apo_access::open : apo_access::signed_only)
       .then(
-        [self, target, next](caf::actor& proxy) {
-          self->state.proxies[target] = proxy;
+        [self, target, next, info](caf::actor& proxy) {
+          (info ? self->state.info_proxies : self->state.proxies)[target]
+            = proxy;
           next(proxy);
         },
         [next](caf::error& err) { next(std::move(err)); });
   };
-  auto discover = [self, target, timeout, next, bind, unknown] {
-    apo_query q{query_by::name, control_apo_name, discovery_ms, false};
+  auto discover = [self, target, timeout, next, bind, unknown, apo_name,
+                   apo_type] {
+    apo_query q{query_by::name, apo_name, discovery_ms, false};
     self
       ->request(self->state.m.apps, timeout + ms(discovery_ms), atom::find_v,
                 std::move(q))
       .then(
-        [target, next, bind, unknown](std::vector<apo_ref>& found) {
+        [target, next, bind, unknown, apo_type](std::vector<apo_ref>& found) {
           for (auto& ref : found)
-            if (ref.module == target && ref.type == control_apo_type) {
+            if (ref.module == target && ref.type == apo_type) {
               bind(ref);
               return;
             }
@@ -131,11 +140,10 @@ void resolve(control_impl self, module_id target, module_id self_id,
   };
   self->request(st.m.apps, timeout, atom::get_v, atom::apps_v)
     .then(
-      [target, bind, discover](std::vector<apo_info>& rows) {
+      [target, bind, discover, apo_name, apo_type](std::vector<apo_info>& rows) {
         for (auto& row : rows)
           if (!row.local && row.ref.module == target
-              && row.ref.name == control_apo_name
-              && row.ref.type == control_apo_type) {
+              && row.ref.name == apo_name && row.ref.type == apo_type) {
             bind(row.ref);
             return;
           }
@@ -148,8 +156,10 @@ void resolve(control_impl self, module_id target, module_id self_id,
 /// A failure through a cached proxy (the module restarted, the binding
 /// ended) is retried once with a fresh binding.
 void forward(control_impl self, module_id target, module_id self_id,
-             std::string text, ms timeout, reply_promise rp, bool retried) {
-  bool cached = self->state.proxies.count(target) > 0;
+             std::string text, ms timeout, reply_promise rp, bool retried,
+             bool info = false) {
+  auto& proxies = info ? self->state.info_proxies : self->state.proxies;
+  bool cached = proxies.count(target) > 0;
   resolve(self, target, self_id, timeout,
           [=](caf::expected<caf::actor> dest) mutable {
             if (!dest) {
@@ -159,16 +169,19 @@ void forward(control_impl self, module_id target, module_id self_id,
             self->request(*dest, timeout, text)
               .then([rp](std::string& reply) mutable { rp.deliver(reply); },
                     [=](caf::error& err) mutable {
-                      self->state.proxies.erase(target);
+                      (info ? self->state.info_proxies : self->state.proxies)
+                        .erase(target);
                       bool timed_out
                         = is(err, ec::timeout)
                           || err == caf::make_error(caf::sec::request_timeout);
                       if (cached && !retried && !timed_out)
-                        forward(self, target, self_id, text, timeout, rp, true);
+                        forward(self, target, self_id, text, timeout, rp, true,
+                                info);
                       else
                         rp.deliver(error_reply(err));
                     });
-          });
+          },
+          info);
 }
 
 // -- commands ----------------------------------------------------------------------------
@@ -543,7 +556,7 @@ void cmd_topics(control_impl self, const json& req, ms timeout,
     return;
   }
   with_self_id(self, timeout, rp, [=](routing_stats& rs) {
-    apo_query q{query_by::name, control_apo_name, discovery_ms, false};
+    apo_query q{query_by::name, info_apo_name, discovery_ms, false};
     self->request(apps, timeout + ms(discovery_ms), atom::find_v, std::move(q))
       .then(
         [=](std::vector<apo_ref>& found) {
@@ -552,7 +565,7 @@ void cmd_topics(control_impl self, const json& req, ms timeout,
           auto join = std::make_shared<join_counter>();
           std::set<module_id> modules{rs.self};
           for (auto& ref : found)
-            if (ref.type == control_apo_type)
+            if (ref.type == info_apo_type)
               modules.insert(ref.module);
           join->pending = modules.size();
           join->done = [rp, rows, unanswered]() mutable {
@@ -581,11 +594,12 @@ void cmd_topics(control_impl self, const json& req, ms timeout,
                             join->finish_one();
                           },
                           [=](caf::error&) {
-                            self->state.proxies.erase(m);
+                            self->state.info_proxies.erase(m);
                             unanswered->push_back(to_hex(m));
                             join->finish_one();
                           });
-                    });
+                    },
+                    true);
         },
         fail_with(rp));
   });
@@ -614,7 +628,7 @@ void cmd_publish(control_impl self, const json& req, ms timeout,
   auto size = payload.size();
   auto type = first_type_name(payload.data(), payload.size());
   self->request(self->state.m.apps, timeout, atom::publish_v, topic,
-                std::move(payload))
+                raw_payload{std::move(payload)})
     .then(
       [rp, topic, size, type]() mutable {
         rp.deliver(ok_reply({{"topic", topic}, {"type", type}, {"bytes", size}}));
@@ -756,11 +770,14 @@ void dispatch(control_impl self, const std::string& text, reply_promise rp) {
     rest.erase("module");
     with_self_id(self, timeout, rp,
                  [self, rp, timeout, target, rest](routing_stats& rs) {
+                   // What herm.info answers goes there: no key needed.
+                   auto what = string_field(rest, "cmd");
+                   auto info = what == "types" || what == "topics";
                    if (*target == rs.self)
                      dispatch(self, dump(rest), rp);
                    else
                      forward(self, *target, rs.self, dump(rest), timeout, rp,
-                             false);
+                             false, info);
                  });
     return;
   }
@@ -801,6 +818,31 @@ void dispatch(control_impl self, const std::string& text, reply_promise rp) {
     rp.deliver(error_reply("unknown_command", "unknown command '" + cmd + "'"));
 }
 
+/// The read-only herm.info APO (actors/control.hpp): "types" and "topics",
+/// answered from this process's descriptions and the ASL's topic table.
+caf::behavior info_fun(caf::event_based_actor* self, app_support_actor apps) {
+  return {
+    [self, apps](std::string& text) -> caf::result<std::string> {
+      auto req = json::parse(text, nullptr, false);
+      auto cmd = req.is_object() ? string_field(req, "cmd") : std::string{};
+      if (cmd == "types")
+        return ok_reply(control_topics::descriptions_json(req["names"]));
+      if (cmd != "topics")
+        return error_reply("unknown_command",
+                           std::string{info_apo_name}
+                             + " answers \"types\" and \"topics\" only");
+      auto rp = self->make_response_promise<std::string>();
+      self->request(apps, default_control_timeout, atom::get_v, atom::topics_v)
+        .then(
+          [rp](std::vector<topic_info>& rows) mutable {
+            rp.deliver(ok_reply(control_topics::topics_json(rows)));
+          },
+          [rp](caf::error& err) mutable { rp.deliver(error_reply(err)); });
+      return rp;
+    },
+  };
+}
+
 control_actor::behavior_type control_fun(control_impl self, module_handles m,
                                          std::string module_name) {
   self->state.m = std::move(m);
@@ -816,6 +858,11 @@ control_actor::behavior_type control_fun(control_impl self, module_handles m,
                 caf::actor_cast<caf::actor>(self), apo_access::signed_only)
     .then([self](apo_ref&) { self->state.registered = "yes"; },
           [self](caf::error& err) { self->state.registered = render(err); });
+  // Its read-only companion, open to every module; it ends with us.
+  auto info = self->spawn<caf::linked>(info_fun, self->state.m.apps);
+  self->request(self->state.m.apps, std::chrono::seconds(10), atom::add_v,
+                std::string{info_apo_name}, std::string{info_apo_type}, info)
+    .then([](apo_ref&) {}, [](caf::error&) {});
   return {
     [self](std::string& text) -> caf::result<std::string> {
       auto rp = self->make_response_promise<std::string>();

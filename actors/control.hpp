@@ -26,6 +26,14 @@ namespace herm {
 constexpr const char* control_apo_name = "herm.control";
 constexpr const char* control_apo_type = "herm.control/1";
 
+/// Name and type of every module's read-only companion of its control
+/// service: it answers "types" (descriptions of message types) and
+/// "topics" (this module's topics) to any module, without a key or
+/// control.allow_unsigned_remote, so that tools on other modules can print
+/// values by field name and list topics network-wide.
+constexpr const char* info_apo_name = "herm.info";
+constexpr const char* info_apo_type = "herm.info/1";
+
 /// How long the service waits for what a request needs (another module's
 /// reply, each echo of a ping) unless the request says "timeout_ms".
 constexpr std::chrono::milliseconds default_control_timeout{5000};

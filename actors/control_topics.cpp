@@ -1,5 +1,6 @@
 #include "actors/control_topics.hpp"
 
+#include <cctype>
 #include <deque>
 #include <map>
 #include <set>
@@ -39,11 +40,49 @@ std::string sentence(const caf::error& err) {
   return render(err);
 }
 
-json description_json(const type_description& d) {
-  json fields = json::array();
-  for (auto& f : d.fields)
-    fields.push_back({{"name", f.name}, {"type", f.type}});
-  return {{"name", d.name}, {"fields", fields}};
+ordered_json description_json(const type_description& d) {
+  ordered_json fields = ordered_json::array();
+  for (auto& f : d.fields) {
+    ordered_json field;
+    field["name"] = f.name;
+    field["type"] = f.type;
+    fields.push_back(std::move(field));
+  }
+  ordered_json out;
+  out["name"] = d.name;
+  out["fields"] = std::move(fields);
+  return out;
+}
+
+/// Most type names one stream remembers having described.
+constexpr size_t max_described = 4096;
+
+/// Appends the description of `type` and of every described type its
+/// fields name, each once (`seen`, at most max_described names), at most
+/// max_type_names to one `out`.
+void describe_into(const std::string& type, std::set<std::string>& seen,
+                   ordered_json& out) {
+  if (out.size() >= max_type_names || seen.size() >= max_described
+      || !seen.insert(type).second)
+    return;
+  auto d = find_description(type);
+  if (!d)
+    return;
+  out.push_back(description_json(*d));
+  for (auto& f : d->fields) {
+    // The names inside a field type: split at the grammar's punctuation.
+    std::string word;
+    for (auto c : f.type + ",") {
+      if (c == '<' || c == '>' || c == ',') {
+        if (!word.empty() && word[0] != '@' && !std::isdigit(
+              static_cast<unsigned char>(word[0])))
+          describe_into(word, seen, out);
+        word.clear();
+      } else {
+        word += c;
+      }
+    }
+  }
 }
 
 // -- stream sessions -----------------------------------------------------------
@@ -126,9 +165,7 @@ bool emit(stream_actor* self, const topic_sample& s) {
     auto descs = ordered_json::array();
     if (text)
       for (auto& t : text->types)
-        if (st.described.insert(t).second)
-          if (auto d = find_description(t))
-            descs.push_back(ordered_json::parse(description_json(*d).dump()));
+        describe_into(t, st.described, descs);
     if (!descs.empty())
       line["descriptions"] = descs;
   }
@@ -293,17 +330,14 @@ byte_buffer payload_of(const json& req, std::string& why) {
 }
 
 json descriptions_json(const json& names) {
-  json out = json::array();
+  auto out = ordered_json::array();
   if (!names.is_array())
-    return out;
-  size_t n = 0;
-  for (auto& name : names) {
-    if (!name.is_string() || ++n > max_type_names)
-      break;
-    if (auto d = find_description(name.get<std::string>()))
-      out.push_back(description_json(*d));
-  }
-  return out;
+    return json::array();
+  std::set<std::string> seen;
+  for (auto& name : names)
+    if (name.is_string())
+      describe_into(name.get<std::string>(), seen, out);
+  return json::parse(out.dump());
 }
 
 void learn_descriptions(const json& result) {

@@ -62,8 +62,9 @@ caf::actor spawn_call(caf::actor_system& sys);
 /// from the value): the payload, or an error sentence in `why`.
 byte_buffer payload_of(const json& req, std::string& why);
 
-/// The descriptions this process has of `names` (a JSON array of strings),
-/// as a JSON array of {"name", "fields": [{"name", "type"}]}.
+/// The descriptions this process has of `names` (a JSON array of strings)
+/// and of the described types their fields contain, as a JSON array of
+/// {"name", "fields": [{"name", "type"}]}; at most 64.
 json descriptions_json(const json& names);
 
 /// Keeps the descriptions of a "types" reply (learned from another module).

@@ -715,6 +715,12 @@ control_actor spawn_silent_service(caf::actor_system& sys,
           kept->push_back(self->make_response_promise<std::string>());
           return kept->back();
         },
+        [self, received, kept](herm::atom::subscribe, std::string&,
+                               caf::actor&) -> caf::result<std::string> {
+          ++*received;
+          kept->push_back(self->make_response_promise<std::string>());
+          return kept->back();
+        },
       };
     });
 }

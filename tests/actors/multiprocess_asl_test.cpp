@@ -213,11 +213,14 @@ TEST(multiprocess_asl, topics_reach_a_late_subscriber_and_survive_a_dying_one) {
 TEST(multiprocess_asl, the_calculator_example_runs) {
   auto ps = next_port();
   auto pc = next_port();
-  child_process serve{{calculator, "serve", "--port", std::to_string(ps),
-                       "--peer", addr(pc), "--seconds", "60"}};
+  // No control sockets: tests running at once must not share the default
+  // ones (hermctl_topics_test covers them).
+  child_process serve{{calculator, "--control", "-", "serve", "--port",
+                       std::to_string(ps), "--peer", addr(pc), "--seconds",
+                       "60"}};
   ASSERT_TRUE(serve.wait_for_line("registered", 10s)) << serve.output();
-  child_process call{{calculator, "call", "--port", std::to_string(pc),
-                      "--peer", addr(ps)}};
+  child_process call{{calculator, "--control", "-", "call", "--port",
+                      std::to_string(pc), "--peer", addr(ps)}};
   EXPECT_EQ(call.wait(30s), 0) << call.output();
   EXPECT_EQ(lines_with(call.output(), "result ").size(), 4u) << call.output();
   EXPECT_EQ(lines_with(call.output(), "result 40 + 2 = 42").size(), 1u)
@@ -226,7 +229,7 @@ TEST(multiprocess_asl, the_calculator_example_runs) {
     << call.output();
   // The results, published by the APO on its module, reached the
   // subscriber on the calling module.
-  EXPECT_GE(lines_with(call.output(), "published: ").size(), 1u) << call.output();
+  EXPECT_GE(lines_with(call.output(), "published by 0x20: ").size(), 1u) << call.output();
   serve.terminate();
   EXPECT_EQ(serve.wait(10s), 0) << serve.output();
 }
@@ -242,11 +245,13 @@ TEST(multiprocess_asl, the_calculator_example_starts_from_a_config_file) {
   {
     std::ofstream f{cfg};
     f << "module:\n  name: caller\n  id: 0x21\n  hello_interval_ms: 100\n"
+         "control:\n  socket: off\n"
          "channels:\n  - name: eth0\n    kind: udp\n    interface: "
       << addr(pc) << "\n    peers: " << addr(ps) << "\n";
   }
-  child_process serve{{calculator, "serve", "--port", std::to_string(ps),
-                       "--peer", addr(pc), "--seconds", "60"}};
+  child_process serve{{calculator, "--control", "-", "serve", "--port",
+                       std::to_string(ps), "--peer", addr(pc), "--seconds",
+                       "60"}};
   ASSERT_TRUE(serve.wait_for_line("registered", 10s)) << serve.output();
   child_process call{{calculator, "call", "--config", cfg}};
   EXPECT_EQ(call.wait(30s), 0) << call.output();

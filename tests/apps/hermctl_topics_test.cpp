@@ -52,10 +52,12 @@ protected:
     auto pc = herm::test::free_udp_port();
     auto pa = herm::test::free_udp_port();
     auto pb = herm::test::free_udp_port();
-    write("a.yaml", module_yaml("a", "0x21", pa, lo(pc) + "," + lo(pb))
+    // b takes no remote control: what tools ask of it (topics, type
+    // descriptions) goes to its open herm.info APO.
+    write("a.yaml", module_yaml("a", "0x21", pa, lo(pc) + "," + lo(pb), true)
                       + "apos:\n  - name: echo\n    kind: echo\n");
-    write("b.yaml", module_yaml("b", "0x22", pb, lo(pa)));
-    write("calc.yaml", module_yaml("calc", "0x20", pc, lo(pa)));
+    write("b.yaml", module_yaml("b", "0x22", pb, lo(pa), false));
+    write("calc.yaml", module_yaml("calc", "0x20", pc, lo(pa), true));
     a_ = std::make_unique<child_process>(
       std::vector<std::string>{hermd, dir_ + "/a.yaml"});
     b_ = std::make_unique<child_process>(
@@ -85,10 +87,13 @@ protected:
   }
 
   static std::string module_yaml(const std::string& name, const std::string& id,
-                                 uint16_t port, const std::string& peers) {
+                                 uint16_t port, const std::string& peers,
+                                 bool remote_control) {
     return "module:\n  name: " + name + "\n  id: " + id
            + "\n  hello_interval_ms: 100\ncontrol:\n  socket: " + sock(name)
-           + "\n  allow_unsigned_remote: true\nchannels:\n  - name: eth0\n"
+           + "\n  allow_unsigned_remote: "
+           + (remote_control ? "true" : "false")
+           + "\nchannels:\n  - name: eth0\n"
              "    kind: udp\n    interface: "
            + lo(port) + "\n    peers: " + peers + "\n";
   }
@@ -258,6 +263,35 @@ TEST_F(hermctl_topics_test, echo_prints_a_user_type_by_field_name_learned_from_i
   EXPECT_NE(echo->output().find(R"({"request":{"a":6,"b":7,"op":"*"},"value":42})"),
             std::string::npos)
     << echo->output();
+  // A recording keeps the descriptions it needs, nested ones included.
+  auto file = dir_ + "/calc.db";
+  auto rec = start(ctl("b") + " record -o " + file + " calculator.results -n 1");
+  // b subscribes already (echo), so the recorder gets no last value: the
+  // next publication, whenever its subscription is in place.
+  for (int i = 0; i < 50 && rec->running(); ++i)
+    run(ctl("b") + R"( call calculator '{"a":1,"b":1,"op":"+"}' -t calc_request)");
+  ASSERT_EQ(rec->wait(20s), 0) << rec->output();
+  auto [rc, info] = run(hermctl + " --json record --info " + file);
+  ASSERT_EQ(rc, 0) << info;
+  EXPECT_EQ(json::parse(info)["described_types"], 2) << info;
+}
+
+TEST_F(hermctl_topics_test, a_module_without_remote_control_still_describes_its_types) {
+  // The calculator's process was not built with hermd's types; b publishes
+  // one and takes no remote control: calc learns the description from b's
+  // open herm.info.
+  auto echo = start(ctl("calc") + " topic echo sonar.b -n 1");
+  ASSERT_TRUE(subscribed("calc", "sonar.b"));
+  auto [rc, out] = run(ctl("b") + " topic pub sonar.b "
+                       "'{\"seq\":5,\"distance_mm\":1200,\"echo_us\":6997}' "
+                       "-t herm::hermd::srf04_reading");
+  ASSERT_EQ(rc, 0) << out;
+  ASSERT_EQ(echo->wait(20s), 0) << echo->output();
+  EXPECT_EQ(echo->output(), "{\"seq\":5,\"distance_mm\":1200,\"echo_us\":6997}\n");
+  // Remote control of b itself is refused, typed.
+  auto [rc2, out2] = run(ctl("a") + " --module 0x22 info");
+  EXPECT_EQ(rc2, 1);
+  EXPECT_NE(out2.find("unauthorized"), std::string::npos) << out2;
 }
 
 TEST_F(hermctl_topics_test, record_then_play_into_a_fresh_subscriber_message_for_message) {

@@ -210,7 +210,7 @@ int call(caf::actor_system& sys, const herm::module_handles& m) {
             + std::to_string(r.b) + " = " + std::to_string(result));
       },
       [&](caf::error& err) {
-        say("error " + herm::render(err));
+        say("error " + herm::render(herm::typed_error(err)));
         ++failures;
       });
   }
@@ -218,7 +218,7 @@ int call(caf::actor_system& sys, const herm::module_handles& m) {
   self->request(proxy, 5s, calc_request{7, 0, "/"}).receive(
     [&](int32_t) { ++failures; },
     [&](caf::error& err) {
-      say("refused 7 / 0: " + herm::render(err));
+      say("refused 7 / 0: " + herm::render(herm::typed_error(err)));
     });
   // Had the calculator gone away meanwhile, its down message would be here.
   self->receive(
