@@ -16,6 +16,7 @@
 #include "caf/stateful_actor.hpp"
 
 #include "actors/runtime/error.hpp"
+#include "actors/type_description.hpp"
 #include "actors/unexpected.hpp"
 #include "apps/hermd/testbed_types.hpp"
 #include "routing/module_id.hpp"
@@ -577,6 +578,16 @@ const apo_kind* find_apo_kind(const std::string& name) {
 
 void add_apo_types(caf::actor_system_config& cfg) {
   cfg.add_message_types<caf::id_block::herm_apos>();
+  // Field names, so that hermctl prints and parses them by name.
+  for (auto err : {describe_type<srf04_reading>("herm::hermd::srf04_reading",
+                                                {"seq", "distance_mm", "echo_us"}),
+                   describe_type<sonar_batch>("herm::hermd::sonar_batch",
+                                              {"source", "batch", "first_seq",
+                                               "distances_mm"}),
+                   describe_type<vision_frame>("herm::hermd::vision_frame",
+                                               {"source", "seq", "data"})})
+    if (err)
+      throw std::logic_error(render(err));
 #ifdef HERM_HAVE_DDS_GATEWAY
   dds_gateway::add_gateway_types(cfg);
 #endif
