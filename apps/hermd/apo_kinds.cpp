@@ -67,6 +67,24 @@ std::string str_option(const apo_config& cfg, const std::string& key,
   return i == cfg.options.end() ? fallback : i->second;
 }
 
+/// The HERM topic an APO also publishes its data on: option `topic`,
+/// `fallback` when absent; "" when it is `""` or `off` (not published).
+std::string topic_option(const apo_config& cfg, std::string fallback) {
+  auto t = str_option(cfg, "topic", std::move(fallback));
+  return t == "off" ? std::string{} : t;
+}
+
+/// Publishes `x` on the APO's topic (none: nothing). One-way: a topic
+/// has no acknowledgement, and the module keeps the last value for late
+/// subscribers.
+template <class Self, class T>
+void publish_on_topic(Self* self, const T& x) {
+  auto& st = self->state;
+  if (!st.opt.topic.empty())
+    self->send(st.ctx.module.apps, atom::publish_v, st.opt.topic,
+               caf::make_message(x));
+}
+
 /// Refuses options a kind does not read (typos).
 caf::error only_options(const apo_config& cfg, std::vector<std::string> known) {
   for (auto& kv : cfg.options)
@@ -264,6 +282,8 @@ struct sonar_options {
   uint64_t baud = 9600;
   uint64_t batch = 10;
   std::string target = "collector";
+  /// Each reading is also published here ("": not published).
+  std::string topic = "sonar";
 };
 
 struct sonar_state {
@@ -287,7 +307,7 @@ struct sonar_state {
 using sonar_actor = caf::stateful_actor<sonar_state>;
 
 caf::expected<sonar_options> sonar_opts(const apo_config& cfg) {
-  if (auto err = only_options(cfg, {"device", "baud", "batch", "target"}))
+  if (auto err = only_options(cfg, {"device", "baud", "batch", "target", "topic"}))
     return err;
   sonar_options o;
   // Without a device the readings come from a board that is a module of
@@ -298,6 +318,7 @@ caf::expected<sonar_options> sonar_opts(const apo_config& cfg) {
   if (auto err = u64_option(cfg, "batch", 10, 1, 1000, o.batch))
     return err;
   o.target = str_option(cfg, "target", "collector");
+  o.topic = topic_option(cfg, "sonar");
   return o;
 }
 
@@ -347,10 +368,13 @@ void send_batch(sonar_actor* self) {
   send_to_target(self, std::move(b));
 }
 
-/// One reading, from the local line or from the board as a module; a
-/// reading without an echo in range is counted, not batched.
+/// One reading, from the local line or from the board as a module: it is
+/// published on the APO's topic as it came (nothing in range too: a
+/// subscriber such as the DDS gateway says so its own way); a reading
+/// without an echo in range is then counted, not batched.
 void take_reading(sonar_actor* self, const srf04_reading& r) {
   auto& s = self->state;
+  publish_on_topic(self, r);
   if (r.distance_mm == srf04_out_of_range) {
     ++s.out_of_range;
     spdlog::debug("{}: SRF04 reading {}: nothing in range ({} so far)",
@@ -419,6 +443,8 @@ struct vision_options {
   uint64_t period_ms = 60000;
   uint64_t bytes = 100;
   std::string target = "collector";
+  /// Each frame is also published here ("": not published).
+  std::string topic = "vision";
 };
 
 struct vision_state {
@@ -438,7 +464,7 @@ struct vision_state {
 using vision_actor = caf::stateful_actor<vision_state>;
 
 caf::expected<vision_options> vision_opts(const apo_config& cfg) {
-  if (auto err = only_options(cfg, {"period_ms", "bytes", "target"}))
+  if (auto err = only_options(cfg, {"period_ms", "bytes", "target", "topic"}))
     return err;
   vision_options o;
   if (auto err = u64_option(cfg, "period_ms", 60000, 1, 86400000, o.period_ms))
@@ -446,6 +472,7 @@ caf::expected<vision_options> vision_opts(const apo_config& cfg) {
   if (auto err = u64_option(cfg, "bytes", 100, 0, 60000, o.bytes))
     return err;
   o.target = str_option(cfg, "target", "collector");
+  o.topic = topic_option(cfg, "vision");
   return o;
 }
 
@@ -468,6 +495,7 @@ caf::behavior vision_source(vision_actor* self, apo_context ctx,
       vision_frame f{st.ctx.module_name, seq, std::vector<uint8_t>(st.opt.bytes)};
       for (size_t i = 0; i < f.data.size(); ++i)
         f.data[i] = static_cast<uint8_t>(seq + i);
+      publish_on_topic(self, f);
       send_to_target(self, std::move(f));
     },
   };
@@ -527,12 +555,15 @@ std::vector<apo_kind> make_kinds() {
     "srf04_batcher",
     "collects SRF04 ultrasonic readings, from a board on a local serial line "
     "(option device) or from a board that is a HERM module (requests of "
-    "herm::hermd::srf04_reading), and sends every `batch` readings to the APO "
-    "`target` (options: device, baud, batch, target)",
+    "herm::hermd::srf04_reading), publishes each on the topic `topic` and "
+    "sends every `batch` readings to the APO `target` (options: device, baud, "
+    "batch, target, topic)",
     sonar_opts, srf04_batcher));
   kinds.push_back(kind_with_options(
     "vision_source",
-    "sends `bytes` bytes of vision data every `period_ms` to the APO `target`",
+    "sends `bytes` bytes of vision data every `period_ms` to the APO `target` "
+    "and publishes each frame on the topic `topic` (options: period_ms, bytes, "
+    "target, topic)",
     vision_opts, vision_source));
   kinds.push_back({"echo", "answers every request with the request itself",
                    [](const apo_config& cfg) { return only_options(cfg, {}); },
