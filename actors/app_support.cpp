@@ -1,78 +1,27 @@
 #include "actors/app_support.hpp"
 
+// The Application Support Layer's actor: adapts messages and timers to the
+// pure cores (APO registry, bindings, outgoing requests, reliable mode,
+// request server, discoveries, topics, reachability: asl_state.hpp) and
+// sends what they decide. Local publications are in asl_topics.cpp.
+
 #include <random>
 #include <variant>
 
 #include "caf/actor_system.hpp"
 #include "caf/mailbox_element.hpp"
-#include "caf/make_message.hpp"
-#include "caf/stateful_actor.hpp"
-#include "caf/typed_event_based_actor.hpp"
 
-#include "actors/apo_proxy.hpp"
-#include "actors/apo_registry.hpp"
 #include "actors/asl_errors.hpp"
-#include "actors/binding_table.hpp"
-#include "actors/discovery_table.hpp"
-#include "actors/outgoing_requests.hpp"
-#include "actors/reach_table.hpp"
-#include "actors/reliable_requests.hpp"
-#include "actors/request_server.hpp"
+#include "actors/asl_state.hpp"
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/type_ids.hpp"
-#include "actors/topic_table.hpp"
 #include "actors/unexpected.hpp"
 
 namespace herm {
 
+namespace asl_detail {
+
 namespace {
-
-using time_point = std::chrono::steady_clock::time_point;
-
-struct asl_state {
-  static inline const char* name = "herm.asl";
-
-  ~asl_state() {
-    // Proxies end with the layer; requests still waiting fail.
-    auto reason = make_error(routing_ec::no_route, "the application support "
-                                                   "layer of this module "
-                                                   "stopped");
-    for (auto& p : bindings.take_proxies())
-      detail::kill_apo_proxy(p, reason, nullptr);
-    for (auto& req : pending ? pending->take_all() : std::vector<outgoing>{})
-      if (req.sender)
-        req.sender->enqueue(nullptr, req.mid.response_id(),
-                            caf::make_message(reason), nullptr);
-  }
-
-  app_support_config cfg;
-  routing_agent_actor agent;
-  module_id self_id = no_module;
-  /// Counters; the cores count into it too (so it outlives them).
-  app_support_stats stats;
-  /// The cores; later ones hold references to earlier ones.
-  std::unique_ptr<apo_registry> apos;
-  /// Reliable mode: round trips, copy schedules, the duplicate cache.
-  std::unique_ptr<reliable_requests> reliable;
-  binding_table bindings;
-  std::unique_ptr<outgoing_requests> pending;
-  std::unique_ptr<request_server> server;
-  std::unique_ptr<discovery_table> discoveries;
-  /// Why the routing agent stopped (then nothing can be sent: requests
-  /// fail at once with app_ec::unavailable).
-  caf::error agent_down;
-  std::unique_ptr<topic_table> topics;
-  /// What the cores decided to send, transmitted by flush.
-  asl_outbox out;
-  /// What flush is sending (the outbox's previous items).
-  decltype(asl_outbox::items) flushing;
-  reach_table reach;
-  caf::strong_actor_ptr sink;
-  uint32_t ticks = 0;
-  byte_buffer buf;
-};
-
-using asl_impl = app_support_actor::stateful_pointer<asl_state>;
 
 // -- small helpers -----------------------------------------------------------------
 
@@ -120,7 +69,8 @@ void send_now(asl_impl self, module_id dst, const asl_message& msg,
              send_packet{dst, asl_protocol, prio_normal, st.buf, sign});
 }
 
-/// Transmits what the cores put in the outbox, in order.
+} // namespace
+
 void flush(asl_impl self) {
   auto& st = self->state;
   // Swapped with a vector kept for the purpose, so that neither allocates
@@ -130,6 +80,8 @@ void flush(asl_impl self) {
     send_now(self, x.dst, x.msg, x.sign);
   st.flushing.clear();
 }
+
+namespace {
 
 /// Sends an ASL message over the network (after what the outbox holds);
 /// with `sign`, signed in a keyed network whatever its `auth.data`
@@ -148,12 +100,15 @@ caf::error agent_gone(asl_impl self) {
   return asl_error::agent_stopped(st.self_id, st.agent_down);
 }
 
-/// Delivers `msg` to `dst` as if `from` sent it with message id `mid`.
+} // namespace
+
 void post(asl_impl self, const caf::strong_actor_ptr& dst,
           caf::strong_actor_ptr from, caf::message_id mid, caf::message msg) {
   if (dst)
     dst->enqueue(std::move(from), mid, std::move(msg), self->context());
 }
+
+namespace {
 
 /// Answers waiting request `out` with `err` (and `out` is done).
 void fail(asl_impl self, const outgoing& out, const caf::error& err) {
@@ -173,7 +128,8 @@ bool reachable(asl_impl self, module_id m) {
   return m == self->state.self_id || self->state.reach.reachable(m);
 }
 
-/// `payload` unmarshalled, or the error after counting it.
+} // namespace
+
 caf::expected<caf::message> unmarshal_counted(asl_impl self,
                                               const byte_buffer& payload) {
   auto& st = self->state;
@@ -187,6 +143,8 @@ caf::expected<caf::message> unmarshal_counted(asl_impl self,
   }
   return msg;
 }
+
+namespace {
 
 // -- bindings ------------------------------------------------------------------------
 
@@ -490,83 +448,6 @@ void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
                   asl_error::apo_gone("APO '" + *name + "' exited"));
 }
 
-// -- topics --------------------------------------------------------------------------
-
-/// Gives a value of topic `t` to its local subscribers: `msg` to those that
-/// take messages (when this process could decode it), a topic_sample to
-/// those in sample mode.
-void deliver(asl_impl self, const std::string& name,
-             const topic_table::topic& t, module_id publisher, uint32_t seq,
-             const caf::message* msg, const byte_buffer& payload) {
-  auto& st = self->state;
-  if (msg != nullptr)
-    for (auto& sub : t.local_subs) {
-      post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
-           caf::make_message_id(), *msg);
-      ++st.stats.publications_delivered;
-    }
-  if (t.sample_subs.empty())
-    return;
-  auto sample = caf::make_message(topic_sample{
-    name, publisher, seq, caf::make_timestamp(), payload});
-  for (auto& sub : t.sample_subs) {
-    post(self, caf::actor_cast<caf::strong_actor_ptr>(sub), nullptr,
-         caf::make_message_id(), sample);
-    ++st.stats.publications_delivered;
-  }
-}
-
-/// Publishes `payload` (the marshalled `msg`; `msg` empty when this
-/// process cannot decode it) from this module.
-void publish_local(asl_impl self, const std::string& topic, caf::message msg,
-                   byte_buffer payload) {
-  auto& st = self->state;
-  auto typed = !msg.empty();
-  auto& t = st.topics->publish(topic, msg, std::move(payload),
-                               self->clock().now(), st.out);
-  flush(self);
-  deliver(self, topic, t, st.self_id, t.seq, typed ? &t.last : nullptr,
-          t.last_payload);
-}
-
-void on_publish_local(asl_impl self, const std::string& topic,
-                      caf::message& msg) {
-  auto& st = self->state;
-  auto payload = marshal(self->system(), msg);
-  if (asl_error::check_label("a topic", topic) || !payload
-      || payload->size() > st.cfg.max_message) {
-    ++st.stats.tx_refused;
-    return;
-  }
-  publish_local(self, topic, msg, std::move(*payload));
-}
-
-/// A value marshalled elsewhere (hermctl): published as it is.
-caf::error on_publish_raw(asl_impl self, const std::string& topic,
-                          byte_buffer& payload) {
-  auto& st = self->state;
-  if (auto err = asl_error::check_label("a topic", topic))
-    return err;
-  if (payload.empty() || payload[0] != apo_format_version)
-    return make_error(ec::invalid_parameter, "not an APO payload of version 1");
-  if (payload.size() > st.cfg.max_message) {
-    ++st.stats.tx_refused;
-    return make_error(ec::packet_too_large,
-                      std::to_string(payload.size()) + " bytes, above "
-                        + std::to_string(st.cfg.max_message));
-  }
-  // Decoded only for local subscribers that take messages; a type this
-  // process lacks still reaches the others.
-  caf::message msg;
-  auto* t = st.topics->find(topic);
-  if (t != nullptr && !t->local_subs.empty())
-    if (auto m = unmarshal(self->system(), payload.data(), payload.size(),
-                           st.cfg.limits))
-      msg = std::move(*m);
-  publish_local(self, topic, std::move(msg), std::move(payload));
-  return {};
-}
-
 // -- the network ---------------------------------------------------------------------
 
 void on_packet(asl_impl self, packet_delivered& pkt) {
@@ -615,7 +496,7 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
           caf::expected<caf::message> value{caf::message{}};
           if (!t->local_subs.empty())
             value = unmarshal_counted(self, x.payload);
-          deliver(self, x.topic, *t, src, x.seq,
+          deliver_topic(self, x.topic, *t, src, x.seq,
                   value && !t->local_subs.empty() ? &*value : nullptr,
                   x.payload);
         }
@@ -958,10 +839,12 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
 
 } // namespace
 
+} // namespace asl_detail
+
 app_support_actor spawn_app_support(caf::actor_system& sys,
                                     routing_agent_actor agent,
                                     app_support_config cfg) {
-  return sys.spawn(asl_fun, std::move(agent), std::move(cfg));
+  return sys.spawn(asl_detail::asl_fun, std::move(agent), std::move(cfg));
 }
 
 } // namespace herm

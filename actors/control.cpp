@@ -5,6 +5,7 @@
 // docs/protocol.md ("Control requests").
 
 #include "actors/control.hpp"
+#include "actors/control_info.hpp"
 #include "actors/control_topics.hpp"
 #include "actors/text_form.hpp"
 #include "actors/control_json.hpp"
@@ -42,6 +43,9 @@ constexpr uint32_t discovery_ms = 500;
 /// Bounds on what a request may ask for.
 constexpr uint32_t max_ping_count = 1000;
 constexpr uint32_t max_timeout_ms = 600000;
+/// The longest "wait_ms" of an apps --all (answers over slow, busy links
+/// may need more than discovery_ms).
+constexpr uint32_t max_wait_ms = 60000;
 
 // -- the actor ------------------------------------------------------------------------------
 
@@ -308,8 +312,8 @@ void reply_rows(control_impl self, const Handle& dest, Atom what, ms timeout,
 
 /// The application table: local APOs and those discovered so far; with
 /// "all": true it first asks the whole network (a flooded query for every
-/// APO, answers collected for discovery_ms), so every APO the network
-/// knows is in the rows, with its module and type.
+/// APO, answers collected for "wait_ms", default discovery_ms), so every
+/// APO the network knows is in the rows, with its module and type.
 void cmd_apps(control_impl self, const json& req, ms timeout,
               reply_promise rp) {
   auto ai = req.find("all");
@@ -317,9 +321,15 @@ void cmd_apps(control_impl self, const json& req, ms timeout,
     reply_rows<apo_info>(self, self->state.m.apps, atom::apps_v, timeout, rp);
     return;
   }
-  apo_query q{query_by::any, std::string{}, discovery_ms, false};
+  auto wait = uint_field(req, "wait_ms", discovery_ms, 1, max_wait_ms);
+  if (!wait) {
+    rp.deliver(error_reply("invalid_parameter",
+                           "wait_ms must be 1 to " + std::to_string(max_wait_ms)));
+    return;
+  }
+  apo_query q{query_by::any, std::string{}, *wait, false};
   self
-    ->request(self->state.m.apps, timeout + ms(discovery_ms), atom::find_v,
+    ->request(self->state.m.apps, timeout + ms(*wait), atom::find_v,
               std::move(q))
     .then(
       [self, timeout, rp](std::vector<apo_ref>&) mutable {
@@ -818,31 +828,6 @@ void dispatch(control_impl self, const std::string& text, reply_promise rp) {
     rp.deliver(error_reply("unknown_command", "unknown command '" + cmd + "'"));
 }
 
-/// The read-only herm.info APO (actors/control.hpp): "types" and "topics",
-/// answered from this process's descriptions and the ASL's topic table.
-caf::behavior info_fun(caf::event_based_actor* self, app_support_actor apps) {
-  return {
-    [self, apps](std::string& text) -> caf::result<std::string> {
-      auto req = json::parse(text, nullptr, false);
-      auto cmd = req.is_object() ? string_field(req, "cmd") : std::string{};
-      if (cmd == "types")
-        return ok_reply(control_topics::descriptions_json(req["names"]));
-      if (cmd != "topics")
-        return error_reply("unknown_command",
-                           std::string{info_apo_name}
-                             + " answers \"types\" and \"topics\" only");
-      auto rp = self->make_response_promise<std::string>();
-      self->request(apps, default_control_timeout, atom::get_v, atom::topics_v)
-        .then(
-          [rp](std::vector<topic_info>& rows) mutable {
-            rp.deliver(ok_reply(control_topics::topics_json(rows)));
-          },
-          [rp](caf::error& err) mutable { rp.deliver(error_reply(err)); });
-      return rp;
-    },
-  };
-}
-
 control_actor::behavior_type control_fun(control_impl self, module_handles m,
                                          std::string module_name) {
   self->state.m = std::move(m);
@@ -859,7 +844,7 @@ control_actor::behavior_type control_fun(control_impl self, module_handles m,
     .then([self](apo_ref&) { self->state.registered = "yes"; },
           [self](caf::error& err) { self->state.registered = render(err); });
   // Its read-only companion, open to every module; it ends with us.
-  auto info = self->spawn<caf::linked>(info_fun, self->state.m.apps);
+  auto info = spawn_info_apo(self, self->state.m.apps);
   self->request(self->state.m.apps, std::chrono::seconds(10), atom::add_v,
                 std::string{info_apo_name}, std::string{info_apo_type}, info)
     .then([](apo_ref&) {}, [](caf::error&) {});
@@ -893,6 +878,8 @@ control_actor spawn_control(caf::actor_system& sys, const module_handles& m,
 std::chrono::milliseconds control_deadline(const std::string& request) {
   auto timeout = default_control_timeout;
   uint64_t times = 1;
+  // apps --all collecting answers for "wait_ms".
+  ms wait{0};
   auto req = json::parse(request, nullptr, false);
   if (req.is_object()) {
     if (auto t = uint_field(req, "timeout_ms", 0, 1, max_timeout_ms); t && *t)
@@ -900,6 +887,8 @@ std::chrono::milliseconds control_deadline(const std::string& request) {
     if (string_field(req, "cmd") == "ping")
       if (auto n = uint_field(req, "count", 1, 1, max_ping_count))
         times = *n;
+    if (auto w = uint_field(req, "wait_ms", 0, 1, max_wait_ms); w && *w)
+      wait = ms(*w);
   }
   // Each echo of a ping, and a forwarded request, may need a discovery
   // first; a forwarded request may be retried once after a failed cached
@@ -907,7 +896,7 @@ std::chrono::milliseconds control_deadline(const std::string& request) {
   auto one = timeout + ms(discovery_ms);
   if (times > 1)
     return one * static_cast<int64_t>(times) + std::chrono::seconds(1);
-  return 2 * one + std::chrono::seconds(1);
+  return 2 * one + wait + std::chrono::seconds(1);
 }
 
 } // namespace herm

@@ -150,8 +150,13 @@ void report_neighbour(agent_impl self, const next_hop& nh, module_id id,
 /// Publishes the next hops of `fast_dests` in cfg.fast_routes, or
 /// withdraws the snapshot while the fast path is not allowed (no address,
 /// a key, a tracer or observer, leaving). No-op without a cell.
-/// O(|fast_dests| log N). routing_agent.cpp.
+/// O(|fast_dests| log N). agent_fast_routes.cpp.
 void publish_fast_routes(agent_impl self);
+
+/// Adds `dst`, just sent to through the agent, to `fast_dests` and
+/// publishes; past cfg.fast_routes' bound it counts `fast_routes_refused`
+/// instead. O(|fast_dests| log N). agent_fast_routes.cpp.
+void note_fast_destination(agent_impl self, module_id dst);
 
 // -- sending (routing_agent.cpp) ------------------------------------------------
 

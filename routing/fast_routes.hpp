@@ -8,7 +8,7 @@
 // broadcasts, authentication, tracing and forwarding stay with the agent;
 // so does every packet the snapshot has no route for.
 //
-// Who publishes what (routing_agent.cpp, publish_fast_routes): only while
+// Who publishes what (agent_fast_routes.cpp, publish_fast_routes): only while
 // the module has an address, no network key, no tracer or observer, and
 // has not said goodbye; only for destinations this module originated a
 // unicast packet to (at most `route_cell::max_destinations()`, counted in

@@ -4,7 +4,7 @@
 // table, neighbour table, flood cache, seqno requests, address allocator,
 // authenticator: agent_state.hpp) and sends what they decide. Queries and
 // route events are answered in agent_reports.cpp, authentication in
-// agent_auth.cpp.
+// agent_auth.cpp, the fast path's snapshot kept in agent_fast_routes.cpp.
 
 #include <algorithm>
 #include <limits>
@@ -645,49 +645,6 @@ void tick(agent_impl self) {
 }
 
 // -- requests from above --------------------------------------------------------
-
-// -- the data path of established routes ------------------------------------------
-
-} // namespace
-
-void publish_fast_routes(agent_impl self) {
-  auto& st = self->state;
-  auto& cell = st.cfg.fast_routes;
-  if (!cell)
-    return;
-  bool allowed = st.alloc->assigned() && !st.auth && !st.cfg.tracer
-                 && !st.cfg.observer && !st.leaving;
-  if (!allowed || st.fast_dests.empty()) {
-    cell->publish(nullptr);
-    return;
-  }
-  auto snap = std::make_shared<route_snapshot>();
-  snap->self = st.table.self();
-  for (auto dst : st.fast_dests) {
-    auto& hops = snap->routes[dst];
-    for (uint8_t k = 0; k < size_classes; ++k)
-      if (auto nh = st.table.lookup(dst, k))
-        if (auto i = st.channels.find(nh->channel); i != st.channels.end())
-          hops[k] = fast_hop{i->second.handle, nh->neighbour};
-  }
-  cell->publish(std::move(snap));
-}
-
-namespace {
-
-/// Adds `dst`, just sent to through the agent, to the snapshot's
-/// destinations (counted when they are full already).
-void note_fast_destination(agent_impl self, module_id dst) {
-  auto& st = self->state;
-  if (!st.cfg.fast_routes || st.fast_dests.count(dst) > 0)
-    return;
-  if (st.fast_dests.size() >= st.cfg.fast_routes->max_destinations()) {
-    ++st.stats.fast_routes_refused;
-    return;
-  }
-  st.fast_dests.insert(dst);
-  publish_fast_routes(self);
-}
 
 caf::error originate(agent_impl self, send_packet& msg) {
   auto& st = self->state;

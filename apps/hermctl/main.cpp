@@ -73,6 +73,7 @@ struct options {
   bool json_out = false;
   uint32_t timeout_ms = 5000;
   bool all = false;
+  uint32_t wait_ms = 0;
   std::string target;
   uint32_t count = 3;
   std::string dot_file;
@@ -492,6 +493,10 @@ int main(int argc, char** argv) {
                                           "discovered");
   apps->add_flag("--all", o.all,
                  "ask the whole network first: every APO with its module");
+  apps->add_option("--wait", o.wait_ms,
+                   "with --all: ms to collect the answers (default 500; "
+                   "more for slow or busy links)")
+    ->check(CLI::Range(1, 60000));
   auto* stats = app.add_subcommand("stats", "every counter");
   auto* ping = app.add_subcommand("ping", "round-trip times to a module's "
                                           "control service");
@@ -595,8 +600,15 @@ int main(int argc, char** argv) {
       return cmd_routes(c, o, module);
     if (neighbors->parsed())
       return show(c, o, module, {{"cmd", "neighbors"}}, show_neighbors);
-    if (apps->parsed())
-      return show(c, o, module, {{"cmd", "apps"}, {"all", o.all}}, show_apps);
+    if (apps->parsed()) {
+      json req{{"cmd", "apps"}, {"all", o.all}};
+      if (o.wait_ms > 0) {
+        if (!o.all)
+          throw failure{exit_usage, "--wait goes with --all"};
+        req["wait_ms"] = o.wait_ms;
+      }
+      return show(c, o, module, std::move(req), show_apps);
+    }
     if (stats->parsed())
       return show(c, o, module, {{"cmd", "stats"}}, show_stats);
     if (ping->parsed())

@@ -447,6 +447,26 @@ TEST_F(control_test, apps_all_asks_the_network_for_every_apo) {
   caf::anon_send_exit(apo, caf::exit_reason::user_shutdown);
 }
 
+// Answers over slow or busy links may need more than the default 500 ms:
+// "wait_ms" sets how long they are collected, and the caller's deadline
+// grows with it.
+TEST_F(control_test, apps_all_waits_as_long_as_asked) {
+  converge();
+  auto t0 = std::chrono::steady_clock::now();
+  auto all = result({{"cmd", "apps"}, {"all", true}, {"wait_ms", 1500}});
+  EXPECT_GE(std::chrono::steady_clock::now() - t0, 1500ms);
+  EXPECT_TRUE(all.is_array()) << all.dump();
+  auto with = control_deadline(R"({"cmd":"apps","all":true,"wait_ms":20000})");
+  auto without = control_deadline(R"({"cmd":"apps","all":true})");
+  EXPECT_EQ(with - without, 20000ms);
+  EXPECT_EQ(error_code({{"cmd", "apps"}, {"all", true}, {"wait_ms", 0}}),
+            "invalid_parameter");
+  EXPECT_EQ(error_code({{"cmd", "apps"}, {"all", true}, {"wait_ms", 60001}}),
+            "invalid_parameter");
+  EXPECT_EQ(error_code({{"cmd", "apps"}, {"all", true}, {"wait_ms", "long"}}),
+            "invalid_parameter");
+}
+
 TEST_F(control_test, the_service_answers_actors_directly_too) {
   caf::scoped_actor self{*sys};
   std::string reply;
