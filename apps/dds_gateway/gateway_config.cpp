@@ -132,8 +132,8 @@ caf::error field(mapping& m, const std::string& key, const std::string& f,
   return caf::none;
 }
 
-bool is_range(const mapping& m) {
-  return m.type != nullptr && std::string{m.type->name} == "sensor_msgs/msg/Range";
+bool is_type(const mapping& m, const char* ros_name) {
+  return m.type != nullptr && std::string{m.type->name} == ros_name;
 }
 
 } // namespace
@@ -143,6 +143,7 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
   gateway_config cfg;
   uint64_t domain = 0;
   uint64_t max_string = 4096;
+  uint64_t max_bytes = 60000;
   uint64_t backlog = cfg.max_backlog;
   // Gateway-wide options first: every mapping starts from them.
   for (auto& [key, v] : options) {
@@ -153,11 +154,13 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
       err = integer(key, v, 0, max_domain, domain);
     else if (key == "max_string")
       err = integer(key, v, 1, 60000, max_string);
+    else if (key == "max_bytes")
+      err = integer(key, v, 1, 60000, max_bytes);
     else if (key == "max_backlog")
       err = integer(key, v, 1, 1000000, backlog);
     else
       err = fail(key, "unknown option (expected domain, max_string, "
-                      "max_backlog or <topic>.<field>)");
+                      "max_bytes, max_backlog or <topic>.<field>)");
     if (err)
       return err;
   }
@@ -165,6 +168,7 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
   // Then one mapping per topic, fields in key order (std::map).
   std::map<std::string, mapping> by_topic;
   // Which option keys each mapping used, to refuse mixed kinds.
+  std::map<std::string, std::vector<std::string>> header_fields;
   std::map<std::string, std::vector<std::string>> range_fields;
   std::map<std::string, std::vector<std::string>> topic_fields;
   std::map<std::string, std::vector<std::string>> service_fields;
@@ -187,13 +191,15 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
       m.dds_topic = "rt/" + topic;
       m.domain = static_cast<uint32_t>(domain);
       m.conv.max_string = max_string;
+      m.conv.max_bytes = max_bytes;
       m.conv.frame_id = topic;
       i = by_topic.emplace(topic, std::move(m)).first;
     }
     if (auto err = field(i->second, key, f, v))
       return err;
-    if (f == "frame_id" || f == "field_of_view" || f == "min_range"
-        || f == "max_range")
+    if (f == "frame_id")
+      header_fields[topic].push_back(key);
+    else if (f == "field_of_view" || f == "min_range" || f == "max_range")
       range_fields[topic].push_back(key);
     else if (f == "type" || f == "direction" || f == "dds_topic")
       topic_fields[topic].push_back(key);
@@ -207,6 +213,10 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
         return fail(topic_fields[topic].front(),
                     "a service mapping (" + topic + ".service) takes no topic "
                     "fields (type, direction, dds_topic)");
+      if (header_fields.count(topic) > 0)
+        return fail(header_fields[topic].front(),
+                    "only a sensor_msgs/msg/Range or Image mapping takes "
+                    "this field");
       if (range_fields.count(topic) > 0)
         return fail(range_fields[topic].front(),
                     "only a sensor_msgs/msg/Range mapping takes this field");
@@ -226,7 +236,13 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
     if (m.type == nullptr)
       return fail(topic + ".type", "missing: every mapping needs its ROS type ("
                                      + known_types() + ") or service");
-    if (!is_range(m) && range_fields.count(topic) > 0)
+    bool range = is_type(m, "sensor_msgs/msg/Range");
+    if (!range && !is_type(m, "sensor_msgs/msg/Image")
+        && header_fields.count(topic) > 0)
+      return fail(header_fields[topic].front(),
+                  "only a sensor_msgs/msg/Range or Image mapping takes this "
+                  "field");
+    if (!range && range_fields.count(topic) > 0)
       return fail(range_fields[topic].front(),
                   "only a sensor_msgs/msg/Range mapping takes this field");
     if (m.conv.min_range > m.conv.max_range)

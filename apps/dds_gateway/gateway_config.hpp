@@ -6,6 +6,7 @@
 //
 //   domain: 0                 default domain of every mapping (0..232)
 //   max_string: 4096          longest string either way, bytes
+//   max_bytes: 60000          longest byte sequence either way (Image data)
 //   max_backlog: 1024         DDS samples waiting for the HERM side at most
 //   <topic>.type: sensor_msgs/msg/Range      required: makes a mapping
 //   <topic>.direction: to_dds | from_dds | both          (to_dds)
@@ -14,7 +15,8 @@
 //   <topic>.reliability: reliable | best_effort          (reliable)
 //   <topic>.depth: 10                        keep_last history depth
 //   <topic>.durability: volatile | transient_local       (volatile)
-//   <topic>.frame_id / field_of_view / min_range / max_range   (Range only)
+//   <topic>.frame_id                          (Range and Image; the topic)
+//   <topic>.field_of_view / min_range / max_range            (Range only)
 //
 // A service instead (docs/gateway.md, "Services"), `<name>` its ROS name:
 //   <name>.service: example_interfaces/srv/AddTwoInts   required

@@ -7,8 +7,10 @@
 #include "actors/runtime/error.hpp"
 #include "apps/dds_gateway/types.hpp"
 #include "apps/hermd/srf04.hpp"
+#include "apps/hermd/testbed_types.hpp"
 
 #include "geometry_msgs/Twist.h"
+#include "sensor_msgs/Image.h"
 #include "sensor_msgs/Range.h"
 #include "std_msgs/Basic.h"
 
@@ -36,6 +38,15 @@ caf::expected<std::string> take_string(const char* s, size_t max) {
   if (n > max)
     return bad("a string over " + std::to_string(max) + " bytes");
   return std::string{s, n};
+}
+
+/// A header stamped `now` (ns since the epoch) with the mapping's frame_id
+/// (borrowed).
+void stamp(std_msgs_msg_dds__Header_& h, const conversion_options& o,
+           dds_time_t now) {
+  h.stamp.sec = static_cast<int32_t>(now / DDS_NSECS_IN_SEC);
+  h.stamp.nanosec = static_cast<uint32_t>(now % DDS_NSECS_IN_SEC);
+  h.frame_id = const_cast<char*>(o.frame_id.c_str());
 }
 
 // -- std_msgs/String <-> std::string -------------------------------------------
@@ -108,9 +119,7 @@ caf::error range_to(const caf::message& v, const conversion_options& o,
     return err;
   auto& r = v.get_as<hermd::srf04_reading>(0);
   auto* s = static_cast<sensor_msgs_msg_dds__Range_*>(sample);
-  s->header.stamp.sec = static_cast<int32_t>(now / DDS_NSECS_IN_SEC);
-  s->header.stamp.nanosec = static_cast<uint32_t>(now % DDS_NSECS_IN_SEC);
-  s->header.frame_id = const_cast<char*>(o.frame_id.c_str());
+  stamp(s->header, o, now);
   s->radiation_type = ultrasound;
   s->field_of_view = o.field_of_view;
   s->min_range = o.min_range;
@@ -147,6 +156,77 @@ caf::expected<caf::message> range_from(const void* sample,
   r.distance_mm = static_cast<uint16_t>(mm);
   r.echo_us = static_cast<uint32_t>(mm * 2000 / 343);
   return caf::make_message(r);
+}
+
+// -- sensor_msgs/Image <-> vision_frame ----------------------------------------------
+
+/// The encoding of a vision frame's bytes: one row of 8-bit grey values.
+constexpr const char* mono8 = "mono8";
+
+/// A frame's bytes as one mono8 row (height 1, width = step = its size);
+/// the data is borrowed, not copied.
+caf::error image_to(const caf::message& v, const conversion_options& o,
+                    dds_time_t now, void* sample) {
+  if (auto err = expect_type<hermd::vision_frame>(v, "herm.vision_frame"))
+    return err;
+  auto& f = v.get_as<hermd::vision_frame>(0);
+  if (f.data.size() > o.max_bytes)
+    return bad("a frame of " + std::to_string(f.data.size()) + " bytes, over "
+               + std::to_string(o.max_bytes));
+  auto* s = static_cast<sensor_msgs_msg_dds__Image_*>(sample);
+  stamp(s->header, o, now);
+  auto n = static_cast<uint32_t>(f.data.size());
+  s->height = n > 0 ? 1 : 0;
+  s->width = n;
+  s->step = n;
+  s->encoding = const_cast<char*>(mono8);
+  s->is_bigendian = 0;
+  s->data._maximum = n;
+  s->data._length = n;
+  s->data._buffer = const_cast<uint8_t*>(f.data.data());
+  s->data._release = false;
+  return caf::none;
+}
+
+/// An 8-bit single-channel image (mono8 or 8UC1) to a frame of its pixels,
+/// row after row without the rows' padding (step - width), `source` its
+/// frame_id, `seq` the count. Other encodings, a step below the width, data
+/// that is not height x step bytes and more than max_bytes of pixels are
+/// refused.
+caf::expected<caf::message> image_from(const void* sample,
+                                       const conversion_options& o,
+                                       uint64_t count) {
+  auto* s = static_cast<const sensor_msgs_msg_dds__Image_*>(sample);
+  auto frame = take_string(s->header.frame_id, o.max_string);
+  if (!frame)
+    return frame.error();
+  auto enc = take_string(s->encoding, 64);
+  if (!enc)
+    return enc.error();
+  if (*enc != mono8 && *enc != "8UC1")
+    return bad("an image of encoding '" + *enc
+               + "' (only mono8 and 8UC1 map to a vision frame)");
+  if (s->step < s->width)
+    return bad("an image whose step (" + std::to_string(s->step)
+               + ") is below its width (" + std::to_string(s->width) + ")");
+  auto rows = uint64_t{s->height};
+  if (rows * s->step != s->data._length
+      || (s->data._length > 0 && s->data._buffer == nullptr))
+    return bad("an image of " + std::to_string(s->height) + " rows of "
+               + std::to_string(s->step) + " bytes with "
+               + std::to_string(s->data._length) + " bytes of data");
+  if (rows * s->width > o.max_bytes)
+    return bad("an image of " + std::to_string(rows * s->width)
+               + " pixels, over " + std::to_string(o.max_bytes));
+  hermd::vision_frame f;
+  f.source = std::move(*frame);
+  f.seq = static_cast<uint32_t>(count);
+  f.data.reserve(rows * s->width);
+  for (uint64_t r = 0; r < rows; ++r) {
+    auto* row = s->data._buffer + r * s->step;
+    f.data.insert(f.data.end(), row, row + s->width);
+  }
+  return caf::make_message(std::move(f));
 }
 
 // -- geometry_msgs/Twist <-> twist -----------------------------------------------------
@@ -214,6 +294,10 @@ const std::vector<ros_type>& ros_types() {
                                      "herm.srf04_reading",
                                      sensor_msgs_msg_dds__Range__desc, range_to,
                                      range_from),
+    row<sensor_msgs_msg_dds__Image_>("sensor_msgs/msg/Image",
+                                     "herm.vision_frame",
+                                     sensor_msgs_msg_dds__Image__desc, image_to,
+                                     image_from),
     // [twist-row]
     row<geometry_msgs_msg_dds__Twist_>("geometry_msgs/msg/Twist", "herm.twist",
                                        geometry_msgs_msg_dds__Twist__desc,

@@ -31,8 +31,10 @@ namespace herm::dds_gateway {
 struct conversion_options {
   /// Longest string either way, bytes; longer ones are refused.
   size_t max_string = 4096;
-  /// sensor_msgs/Range: header.frame_id, and the sensor's cone and limits
-  /// (rad, m). The defaults are an SRF04's.
+  /// Longest byte sequence either way (an Image's pixels), bytes.
+  size_t max_bytes = 60000;
+  /// sensor_msgs/Range and Image: header.frame_id. Range: the sensor's
+  /// cone and limits (rad, m); the defaults are an SRF04's.
   std::string frame_id = "sonar";
   float field_of_view = 0.5236f;
   float min_range = 0.03f;

@@ -74,10 +74,10 @@ caf::behavior service_client(client_actor* self, mapping m,
       return call(self, x.move_content_to_message());
     });
   return {
-    [self](svc_reply_atom, uint64_t guid, int64_t seq, caf::message& resp) {
+    [self](svc_reply_atom, uint64_t reply_guid, int64_t seq, caf::message& resp) {
       auto& s = self->state;
       s.backlog->fetch_sub(1);
-      if (guid != s.guid)
+      if (reply_guid != s.guid)
         return;
       auto i = s.pending.find(seq);
       if (i == s.pending.end())

@@ -26,12 +26,9 @@
 // "EVENT FAILED NAME: ..."; the exit status is 0 when all were seen.
 
 #include <arpa/inet.h>
-#include <fcntl.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
-#include <poll.h>
 #include <signal.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -41,10 +38,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <iostream>
 #include <iterator>
-#include <map>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -53,260 +48,17 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "apps/testbed/dds_view.hpp"
+#include "apps/testbed/runner.hpp"
 #include "channels/testing/loopback.hpp"
 #include "channels/testing/null_modem.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
-using clock_type = std::chrono::steady_clock;
+using herm::testbed::clock_type;
+using herm::testbed::has;
 
 namespace {
-
-// -- child processes -----------------------------------------------------------------
-
-struct child {
-  std::string name;
-  std::vector<std::string> argv;
-  pid_t pid = -1;
-  int fd = -1;
-  std::string partial;
-  /// Every line it printed, over all its lives.
-  std::vector<std::string> lines;
-};
-
-bool has(const std::string& line, const std::string& what) {
-  return line.find(what) != std::string::npos;
-}
-
-class testbed {
-public:
-  testbed(std::string bin_dir, bool quiet)
-    : bin_(std::move(bin_dir)), quiet_(quiet), start_(clock_type::now()) {
-    // nop
-  }
-
-  ~testbed() {
-    for (auto& [name, c] : children_)
-      if (c.pid > 0) {
-        ::kill(c.pid, SIGKILL);
-        ::waitpid(c.pid, nullptr, 0);
-      }
-  }
-
-  std::string bin(const std::string& name) const {
-    return bin_ + "/" + name;
-  }
-
-  void spawn(const std::string& name, std::vector<std::string> argv) {
-    auto& c = children_[name];
-    c.name = name;
-    c.argv = std::move(argv);
-    start(c);
-  }
-
-  void restart(const std::string& name) {
-    start(children_.at(name));
-  }
-
-  void signal(const std::string& name, int sig) {
-    auto& c = children_.at(name);
-    if (c.pid > 0)
-      ::kill(c.pid, sig);
-  }
-
-  /// Waits for `name` to exit after a signal; returns its status or -1.
-  int reap(const std::string& name, std::chrono::milliseconds timeout) {
-    auto& c = children_.at(name);
-    auto deadline = clock_type::now() + timeout;
-    while (c.pid > 0 && clock_type::now() < deadline) {
-      int status = 0;
-      if (::waitpid(c.pid, &status, WNOHANG) == c.pid) {
-        pump(50ms);
-        c.pid = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-      }
-      pump(20ms);
-    }
-    return -1;
-  }
-
-  /// Reads every child's output for `dt`, printing it as a trace.
-  void pump(std::chrono::milliseconds dt) {
-    auto deadline = clock_type::now() + dt;
-    do {
-      std::vector<pollfd> fds;
-      std::vector<child*> owners;
-      for (auto& [name, c] : children_)
-        if (c.fd >= 0) {
-          fds.push_back({c.fd, POLLIN, 0});
-          owners.push_back(&c);
-        }
-      auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-        deadline - clock_type::now());
-      if (fds.empty()) {
-        std::this_thread::sleep_for(std::max(left, 0ms));
-        return;
-      }
-      if (::poll(fds.data(), fds.size(), static_cast<int>(std::max<int64_t>(left.count(), 0))) <= 0)
-        continue;
-      for (size_t i = 0; i < fds.size(); ++i) {
-        if ((fds[i].revents & (POLLIN | POLLHUP)) == 0)
-          continue;
-        char buf[4096];
-        auto n = ::read(fds[i].fd, buf, sizeof(buf));
-        auto& c = *owners[i];
-        if (n <= 0) {
-          ::close(c.fd);
-          c.fd = -1;
-          continue;
-        }
-        c.partial.append(buf, static_cast<size_t>(n));
-        size_t pos;
-        while ((pos = c.partial.find('\n')) != std::string::npos) {
-          auto line = c.partial.substr(0, pos);
-          c.partial.erase(0, pos + 1);
-          c.lines.push_back(line);
-          print(c.name, line);
-        }
-      }
-    } while (clock_type::now() < deadline);
-  }
-
-  /// Pumps until `pred` holds for some line `name` printed after `from`
-  /// (an index into its lines); returns that line.
-  std::optional<std::string>
-  wait_line(const std::string& name, size_t from,
-            const std::function<bool(const std::string&)>& pred,
-            std::chrono::milliseconds timeout) {
-    auto deadline = clock_type::now() + timeout;
-    auto& c = children_.at(name);
-    size_t i = from;
-    for (;;) {
-      for (; i < c.lines.size(); ++i)
-        if (pred(c.lines[i]))
-          return c.lines[i];
-      if (clock_type::now() >= deadline)
-        return std::nullopt;
-      pump(20ms);
-    }
-  }
-
-  /// wait_line for a line holding every one of `parts`, then the event
-  /// `event_name`: ok with the line found, failed with `missing` when none
-  /// came in time.
-  void expect_line(const std::string& event_name, const std::string& name,
-                   size_t from, std::chrono::milliseconds timeout,
-                   const std::vector<std::string>& parts,
-                   const std::string& missing) {
-    auto found = wait_line(name, from, [&parts](const std::string& l) {
-      return std::all_of(parts.begin(), parts.end(),
-                         [&l](const std::string& p) { return has(l, p); });
-    }, timeout);
-    event(found.has_value(), event_name, found ? *found : missing);
-  }
-
-  const std::string& line(const std::string& name, size_t i) const {
-    return children_.at(name).lines.at(i);
-  }
-
-  size_t mark(const std::string& name) const {
-    return children_.at(name).lines.size();
-  }
-
-  /// Runs a command to completion (hermctl), printing its output.
-  std::pair<int, std::string> run(const std::vector<std::string>& argv,
-                                  bool show = true) {
-    std::string cmd;
-    for (auto& a : argv)
-      cmd += "'" + a + "' ";
-    cmd += "2>&1";
-    std::string out;
-    auto* p = ::popen(cmd.c_str(), "r");
-    if (p == nullptr)
-      return {-1, "popen failed"};
-    char buf[4096];
-    size_t n;
-    while ((n = std::fread(buf, 1, sizeof(buf), p)) > 0)
-      out.append(buf, n);
-    auto status = ::pclose(p);
-    if (show) {
-      std::istringstream in{out};
-      for (std::string line; std::getline(in, line);)
-        std::cout << "           | " << line << "\n";
-      std::cout << std::flush;
-    }
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-  }
-
-  void say(const std::string& text) {
-    std::cout << "\n" << stamp() << " == " << text << "\n" << std::flush;
-  }
-
-  void event(bool ok, const std::string& name, const std::string& detail) {
-    std::cout << stamp() << " EVENT " << (ok ? "ok " : "FAILED ") << name
-              << ": " << detail << "\n"
-              << std::flush;
-    if (!ok)
-      ++failed_;
-    ++events_;
-  }
-
-  int failed() const {
-    return failed_;
-  }
-
-  int events() const {
-    return events_;
-  }
-
-private:
-  std::string stamp() const {
-    char buf[32];
-    auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(
-                clock_type::now() - start_)
-                .count();
-    std::snprintf(buf, sizeof(buf), "%7.3f", ms / 1000.0);
-    return buf;
-  }
-
-  void print(const std::string& name, const std::string& line) {
-    if (quiet_ && line.find("packet ") != std::string::npos)
-      return;
-    char head[48];
-    std::snprintf(head, sizeof(head), "%s %-7s| ", stamp().c_str(),
-                  name.c_str());
-    std::cout << head << line << "\n" << std::flush;
-  }
-
-  void start(child& c) {
-    int fds[2];
-    if (::pipe2(fds, O_CLOEXEC) != 0)
-      return;
-    c.pid = ::fork();
-    if (c.pid == 0) {
-      ::dup2(fds[1], STDOUT_FILENO);
-      ::dup2(fds[1], STDERR_FILENO);
-      std::vector<char*> args;
-      for (auto& a : c.argv)
-        args.push_back(a.data());
-      args.push_back(nullptr);
-      ::execv(args[0], args.data());
-      ::_exit(127);
-    }
-    ::close(fds[1]);
-    if (c.fd >= 0)
-      ::close(c.fd);
-    c.fd = fds[0];
-    c.partial.clear();
-  }
-
-  std::string bin_;
-  bool quiet_;
-  clock_type::time_point start_;
-  std::map<std::string, child> children_;
-  int failed_ = 0;
-  int events_ = 0;
-};
 
 /// The board's instance as the sensor module's neighbour table has it
 /// (`hermctl --json neighbours`), or nothing while it is not a neighbour.
@@ -372,6 +124,16 @@ int main(int argc, char** argv) {
                  "(herm-mcu-board, the same client on this machine) or auto "
                  "(avr when it was built)")
     ->check(CLI::IsMember({"auto", "avr", "host"}));
+  bool dds = false;
+  int dds_domain = -1;
+  app.add_flag("--dds-gateway", dds,
+               "the main controller also runs a DDS / ROS 2 gateway sending "
+               "the sensor's readings to rt/sonar (sensor_msgs/msg/Range), "
+               "and a DDS reader checks that they arrive (docs/testbed.md)");
+  app.add_option("--dds-domain", dds_domain,
+                 "the DDS domain of --dds-gateway (default: one of 1 .. 200 "
+                 "chosen from the process id; ROS 2's ROS_DOMAIN_ID)")
+    ->check(CLI::Range(0, 232));
   CLI11_PARSE(app, argc, argv);
   std::signal(SIGPIPE, SIG_IGN);
 
@@ -387,6 +149,32 @@ int main(int argc, char** argv) {
   }
   const bool use_avr = board == "avr" || (board == "auto" && avr_built);
 
+  // -- the DDS gateway (--dds-gateway) ----------------------------------------------------
+  const auto dds_reader_bin = bin_dir + "/dds_peer";
+  if (dds) {
+#ifndef HERM_TESTBED_DDS
+    std::cerr << "herm-testbed: --dds-gateway needs hermd built with the DDS gateway, "
+                 "and this build has none: it needs Cyclone DDS and idlc (apt-get "
+                 "install cyclonedds-dev cyclonedds-tools, then configure again; "
+                 "docs/gateway.md)\n";
+    return 2;
+#endif
+    if (!fs::exists(dds_reader_bin)) {
+      std::cerr << "herm-testbed: --dds-gateway needs the DDS reader " << dds_reader_bin
+                << " (tests/gateway/dds_peer.c, built with the tests: "
+                   "-DHERM_BUILD_TESTS=ON)\n";
+      return 2;
+    }
+    if (dds_domain < 0)
+      dds_domain = 1 + static_cast<int>(::getpid() % 200);
+    // Every DDS participant of the run (the gateway in main's hermd, the
+    // reader) inherits it: loopback only.
+    ::setenv("CYCLONEDDS_URI", herm::testbed::dds_loopback_only, 1);
+  } else if (dds_domain >= 0) {
+    std::cerr << "herm-testbed: --dds-domain is for --dds-gateway\n";
+    return 2;
+  }
+
   // -- the work directory -------------------------------------------------------------
   if (out_dir.empty()) {
     char tmpl[] = "/tmp/herm-testbed-XXXXXX";
@@ -401,6 +189,8 @@ int main(int argc, char** argv) {
   out_dir = fs::absolute(out_dir).string();
   auto sonar_period = static_cast<uint64_t>(30000 / scale);
   auto vision_period = static_cast<uint64_t>(60000 / scale);
+  // The paper's vision data: 100 bytes a frame.
+  constexpr unsigned vision_bytes = 100;
   // Routing timers scale too, within reason: repair within a couple of
   // hundred milliseconds keeps the demonstration short.
   auto hello = std::clamp<uint64_t>(static_cast<uint64_t>(1000 / scale * 20), 100, 1000);
@@ -454,7 +244,8 @@ int main(int argc, char** argv) {
 apos:
   - name: collector
     kind: collector
-)");
+)" + (dds ? herm::testbed::dds_gateway_apo(static_cast<uint32_t>(dds_domain))
+          : std::string{}));
   auto sensor_cfg = write("sensor", head("sensor", "sensor") + R"(channels:
   - name: rs0
     kind: serial
@@ -501,7 +292,7 @@ apos:
     kind: vision_source
     options:
       period_ms: )" + std::to_string(vision_period) + R"(
-      bytes: 100
+      bytes: )" + std::to_string(vision_bytes) + R"(
       target: collector
 )");
 
@@ -529,7 +320,7 @@ apos:
                                        std::to_string(sonar_period), "--echo",
                                        "srf04"};
 
-  testbed tb{bin_dir, quiet};
+  herm::testbed::runner tb{bin_dir, quiet};
   auto hermd = tb.bin("hermd");
   auto hermctl = tb.bin("hermctl");
   auto sock = [&](const std::string& m) { return out_dir + "/" + m + ".sock"; };
@@ -561,6 +352,11 @@ apos:
                                   : " (herm-avr-sim or the firmware was not built: "
                                     "it needs avr-gcc and libsimavr, see .ci/setup)")
               << ", a reading every " << sonar_period << " ms\n";
+  if (dds)
+    std::cout << "  DDS gateway on the main controller: HERM topic 'sonar' -> DDS rt/sonar "
+                 "(sensor_msgs/msg/Range, frame "
+              << herm::testbed::dds_sonar_frame << ") on domain " << dds_domain
+              << ", loopback only (CYCLONEDDS_URI); a DDS reader (dds_peer) reads it\n";
 
   // -- 1. start ---------------------------------------------------------------------------
   tb.say("starting four modules and the AVR board with its SRF04");
@@ -576,6 +372,15 @@ apos:
   }
   tb.spawn("avr", board_argv);
   auto long_wait = std::chrono::milliseconds(std::max<uint64_t>(20000, sonar_period * 25));
+  // The DDS reader: five readings and three images, then it exits (0 when
+  // they came).
+  constexpr int dds_readings = 5;
+  constexpr int dds_images = 3;
+  if (dds)
+    tb.spawn("dds", {dds_reader_bin, std::to_string(dds_domain),
+                     std::to_string(dds_readings), "0", "0",
+                     std::to_string(2 * long_wait.count()), "0",
+                     std::to_string(dds_images)});
   bool routes = true;
   for (auto id : {"0x40", "0x50", "0x30"}) {
     auto line = tb.wait_line("main", 0, [&](const std::string& l) {
@@ -622,7 +427,10 @@ apos:
   tb.say("every APO the network knows, as the main controller finds them "
          "(the board's own `srf04` among them)");
   {
-    auto [apps_status, apps_out] = ctl("main", {"apps", "--all"});
+    // The answers of the sensor module and the board come over 19,200-baud
+    // lines that also carry the readings (to the gateway too, with
+    // --dds-gateway): they take longer than the default 500 ms.
+    auto [apps_status, apps_out] = ctl("main", {"apps", "--all", "--wait", "2000"});
     std::istringstream rows{apps_out};
     std::string row, found;
     while (std::getline(rows, row))
@@ -687,6 +495,53 @@ apos:
   tb.expect_line("vision_frame_received", "main", 0, 10s,
                  {"collector: vision frame"},
                  "no vision frame reached the collector");
+  if (dds) {
+    tb.say("the DDS gateway: the sensor's readings on rt/sonar and the vision frames "
+           "on rt/vision, read by a DDS reader with no HERM code in it");
+    // The sensor's APO publishes each reading on the HERM topic `sonar`,
+    // the camera each frame on `vision`; the gateway on main subscribes to
+    // both (two modules away from the board and from vision) and writes
+    // each to DDS.
+    auto mapped = tb.wait_line("main", 0, [](const std::string& l) {
+      return has(l, "dds_gateway: 'sonar' -> DDS rt/sonar");
+    }, 10s);
+    auto mapped_vision = tb.wait_line("main", 0, [](const std::string& l) {
+      return has(l, "dds_gateway: 'vision' -> DDS rt/vision");
+    }, 10s);
+    auto done = tb.wait_line("dds", 0, [](const std::string& l) {
+      return has(l, "done ranges");
+    }, 2 * long_wait);
+    auto status = tb.reap("dds", 10s);
+    std::vector<std::string> lines;
+    for (size_t i = 0; i < tb.mark("dds"); ++i)
+      lines.push_back(tb.line("dds", i));
+    auto seen = herm::testbed::view_dds_reader(lines, board_lo, board_hi, vision_bytes);
+    bool ok = mapped && done && status == 0 && seen.from_sensor >= dds_readings
+              && seen.xcdr1;
+    tb.event(ok, "dds_reader_sees_sonar",
+             ok ? "the DDS reader took " + std::to_string(seen.from_sensor)
+                    + " readings of the board on rt/sonar as "
+                      "sensor_msgs::msg::dds_::Range_ in XCDR1, e.g. '"
+                    + seen.first + "'"
+                : !mapped ? std::string{"the main controller's gateway did not map 'sonar'"}
+                          : "the DDS reader exited " + std::to_string(status) + " with "
+                              + std::to_string(seen.ranges) + " readings, "
+                              + std::to_string(seen.from_sensor)
+                              + " of them the board's"
+                              + (seen.xcdr1 ? "" : ", no XCDR1 encoding seen"));
+    bool vision_ok = mapped_vision && done && status == 0 && seen.frames >= dds_images;
+    tb.event(vision_ok, "dds_reader_sees_vision",
+             vision_ok ? "the DDS reader took " + std::to_string(seen.frames)
+                           + " vision frames of " + std::to_string(vision_bytes)
+                           + " bytes on rt/vision as sensor_msgs::msg::dds_::Image_ "
+                             "(mono8, one row), e.g. '"
+                           + seen.first_image + "'"
+             : !mapped_vision
+               ? std::string{"the main controller's gateway did not map 'vision'"}
+               : "the DDS reader exited " + std::to_string(status) + " with "
+                   + std::to_string(seen.images) + " images, "
+                   + std::to_string(seen.frames) + " of them vision frames");
+  }
 
   // -- 3. the board reboots ----------------------------------------------------------------
   tb.say(use_avr ? "rebooting the AVR board (its EEPROM boot counter is its instance)"
@@ -788,6 +643,8 @@ apos:
              + (gone ? ", " + *gone : ""));
   tb.say("main's channels and counters");
   ctl("main", {"channels"});
+  if (dds)
+    tb.reap("dds", 0ms);
   for (auto name : {"vision", "mobile", "main", "avr"}) {
     tb.signal(name, SIGTERM);
     tb.reap(name, 10s);

@@ -1,7 +1,7 @@
 /* A ROS 2 node's view of a HERM robot, with nothing of HERM in it: Cyclone
  * DDS's C API and the types idlc generated from apps/dds_gateway/idl.
  *
- *   dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS [CALLS]
+ *   dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS [CALLS [IMAGES]]
  *
  * On domain DOMAIN it subscribes to rt/sonar as
  * sensor_msgs::msg::dds_::Range_ and prints each reading,
@@ -26,6 +26,11 @@
  * It then also waits for all CALLS replies, one dds_adder and one
  * dds_silent request.
  *
+ * With IMAGES, it also subscribes to rt/vision as
+ * sensor_msgs::msg::dds_::Image_ and prints each image,
+ *   image <width>x<height> <encoding> frame <frame_id> bytes <n> first <byte>
+ * until IMAGES images came.
+ *
  * Exits 0 when everything came and was sent, 1 when TIMEOUT_MS passed
  * first, 2 on a usage or DDS error. Restrict it to loopback with
  * CYCLONEDDS_URI. */
@@ -39,6 +44,7 @@
 
 #include "example_interfaces/AddTwoInts.h"
 #include "geometry_msgs/Twist.h"
+#include "sensor_msgs/Image.h"
 #include "sensor_msgs/Range.h"
 
 static dds_entity_t check(dds_entity_t e, const char* what) {
@@ -63,12 +69,13 @@ static int sub_matched(dds_entity_t reader) {
 }
 
 int main(int argc, char** argv) {
-  if (argc != 6 && argc != 7) {
-    fprintf(stderr,
-            "usage: dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS [CALLS]\n");
+  if (argc < 6 || argc > 8) {
+    fprintf(stderr, "usage: dds_peer DOMAIN RANGES TWISTS BAD TIMEOUT_MS "
+                    "[CALLS [IMAGES]]\n");
     return 2;
   }
-  int calls = argc == 7 ? atoi(argv[6]) : 0;
+  int calls = argc >= 7 ? atoi(argv[6]) : 0;
+  int want_images = argc == 8 ? atoi(argv[7]) : 0;
   dds_domainid_t domain = (dds_domainid_t) atoi(argv[1]);
   int want_ranges = atoi(argv[2]);
   int twists = atoi(argv[3]);
@@ -89,6 +96,15 @@ int main(int argc, char** argv) {
                               "reader rt/sonar");
   dds_entity_t raw = check(dds_create_reader(pp, sonar, qos, NULL),
                            "raw reader rt/sonar");
+  dds_entity_t vision = 0;
+  if (want_images > 0)
+    vision = check(
+      dds_create_reader(pp, check(dds_create_topic(pp,
+                                                   &sensor_msgs_msg_dds__Image__desc,
+                                                   "rt/vision", NULL, NULL),
+                                  "topic rt/vision"),
+                        qos, NULL),
+      "reader rt/vision");
   dds_entity_t cmd = check(
     dds_create_topic(pp, &geometry_msgs_msg_dds__Twist__desc, "rt/cmd_vel",
                      NULL, NULL),
@@ -159,11 +175,12 @@ int main(int argc, char** argv) {
   fflush(stdout);
 
   int ranges = 0, sent_twists = 0, sent_bad = 0, encoding_shown = 0;
-  int sent_calls = 0, replies = 0, served = 0, ignored = 0;
+  int sent_calls = 0, replies = 0, served = 0, ignored = 0, images = 0;
   dds_time_t next_send = 0;
   while (dds_time() < deadline) {
     if (ranges >= want_ranges && sent_twists >= twists && sent_bad >= bad
-        && replies >= calls && (calls == 0 || (served > 0 && ignored > 0)))
+        && replies >= calls && (calls == 0 || (served > 0 && ignored > 0))
+        && images >= want_images)
       break;
     /* Send one of each due every 50 ms once the other side listens. */
     if (dds_time() >= next_send) {
@@ -207,6 +224,23 @@ int main(int argc, char** argv) {
     }
     if (n > 0)
       dds_return_loan(reader, samples, n);
+    if (want_images > 0) {
+      void* s[4] = {NULL};
+      dds_sample_info_t si[4];
+      int k = dds_take(vision, s, si, 4, 4);
+      for (int i = 0; i < k; ++i) {
+        sensor_msgs_msg_dds__Image_* im = s[i];
+        if (!si[i].valid_data)
+          continue;
+        printf("image %ux%u %s frame %s bytes %u first %u\n", im->width,
+               im->height, im->encoding, im->header.frame_id,
+               im->data._length,
+               im->data._length > 0 ? im->data._buffer[0] : 0u);
+        ++images;
+      }
+      if (k > 0)
+        dds_return_loan(vision, s, k);
+    }
     struct ddsi_serdata* cdr[8];
     dds_sample_info_t raw_infos[8];
     int m = dds_takecdr(raw, cdr, 8, raw_infos, DDS_ANY_STATE);
@@ -263,9 +297,11 @@ int main(int argc, char** argv) {
     fflush(stdout);
   }
   int ok = ranges >= want_ranges && sent_twists >= twists && sent_bad >= bad
-           && replies >= calls && (calls == 0 || (served > 0 && ignored > 0));
-  printf("done ranges %d twists %d bad %d replies %d served %d ignored %d\n",
-         ranges, sent_twists, sent_bad, replies, served, ignored);
+           && replies >= calls && (calls == 0 || (served > 0 && ignored > 0))
+           && images >= want_images;
+  printf("done ranges %d twists %d bad %d replies %d served %d ignored %d "
+         "images %d\n",
+         ranges, sent_twists, sent_bad, replies, served, ignored, images);
   fflush(stdout);
   dds_delete(pp);
   return ok ? 0 : 1;

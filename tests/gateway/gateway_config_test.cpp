@@ -111,7 +111,12 @@ TEST(gateway_config, errors_name_the_option_and_what_was_expected) {
      "options.domain: expected an integer in [0, 232], got '233'"},
     {{{"speed", "1"}}, "options.speed: unknown option"},
     {{{"x.type", "std_msgs/msg/Int32"}, {"x.frame_id", "f"}},
-     "options.x.frame_id: only a sensor_msgs/msg/Range mapping takes this field"},
+     "options.x.frame_id: only a sensor_msgs/msg/Range or Image mapping takes "
+     "this field"},
+    {{{"v.type", "sensor_msgs/msg/Image"}, {"v.min_range", "1"}},
+     "options.v.min_range: only a sensor_msgs/msg/Range mapping takes this field"},
+    {{{"max_bytes", "60001"}},
+     "options.max_bytes: expected an integer in [1, 60000], got '60001'"},
     {{{"s.type", "sensor_msgs/msg/Range"}, {"s.min_range", "NaN"}},
      "options.s.min_range: expected a number"},
     {{{"s.type", "sensor_msgs/msg/Range"}, {"s.min_range", "3"},
@@ -124,6 +129,24 @@ TEST(gateway_config, errors_name_the_option_and_what_was_expected) {
     EXPECT_NE(text.find(c.text), std::string::npos)
       << "expected '" << c.text << "' in '" << text << "'";
   }
+}
+
+TEST(gateway_config, an_image_mapping_takes_a_frame_id_and_the_byte_bound) {
+  auto cfg = parse_gateway_options({{"max_bytes", "4096"},
+                                    {"vision.type", "sensor_msgs/msg/Image"},
+                                    {"vision.frame_id", "camera_front"}});
+  ASSERT_TRUE(cfg) << herm::render(cfg.error());
+  ASSERT_EQ(cfg->mappings.size(), 1u);
+  auto& m = cfg->mappings[0];
+  EXPECT_STREQ(m.type->name, "sensor_msgs/msg/Image");
+  EXPECT_EQ(m.dds_topic, "rt/vision");
+  EXPECT_EQ(m.conv.frame_id, "camera_front");
+  EXPECT_EQ(m.conv.max_bytes, 4096u);
+  // Without them: the topic's name and HERM's largest message.
+  auto plain = parse_gateway_options({{"vision.type", "sensor_msgs/msg/Image"}});
+  ASSERT_TRUE(plain);
+  EXPECT_EQ(plain->mappings[0].conv.frame_id, "vision");
+  EXPECT_EQ(plain->mappings[0].conv.max_bytes, 60000u);
 }
 
 TEST(gateway_config, mappings_are_bounded) {

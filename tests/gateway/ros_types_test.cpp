@@ -12,14 +12,17 @@
 #include "apps/dds_gateway/ros_services.hpp"
 #include "apps/dds_gateway/ros_types.hpp"
 #include "apps/dds_gateway/types.hpp"
+#include "channels/error.hpp"
 
 #include "example_interfaces/AddTwoInts.h"
 #include "geometry_msgs/Twist.h"
+#include "sensor_msgs/Image.h"
 #include "sensor_msgs/Range.h"
 #include "std_msgs/Basic.h"
 
 using namespace herm::dds_gateway;
 using herm::hermd::srf04_reading;
+using herm::hermd::vision_frame;
 
 namespace {
 
@@ -57,6 +60,7 @@ TEST(ros_types, names_on_dds_are_those_rmw_cyclonedds_registers) {
     {"std_msgs/msg/Float64", "std_msgs::msg::dds_::Float64_"},
     {"std_msgs/msg/Int32", "std_msgs::msg::dds_::Int32_"},
     {"sensor_msgs/msg/Range", "sensor_msgs::msg::dds_::Range_"},
+    {"sensor_msgs/msg/Image", "sensor_msgs::msg::dds_::Image_"},
     {"geometry_msgs/msg/Twist", "geometry_msgs::msg::dds_::Twist_"},
   };
   ASSERT_EQ(ros_types().size(), std::size(cases));
@@ -171,6 +175,81 @@ TEST(ros_types, a_twist_with_nan_or_inf_is_refused) {
   t.angular.z = 0;
   t.linear.y = std::numeric_limits<double>::infinity();
   EXPECT_FALSE((from<twist>("geometry_msgs/msg/Twist", t)));
+}
+
+TEST(ros_types, a_vision_frame_is_one_mono8_row_of_its_bytes_borrowed) {
+  sensor_msgs_msg_dds__Image_ s;
+  conversion_options o;
+  o.frame_id = "camera";
+  auto v = caf::make_message(vision_frame{"cam0", 9, {1, 2, 3, 250}});
+  ASSERT_FALSE(to("sensor_msgs/msg/Image", v, s, o));
+  EXPECT_EQ(s.height, 1u);
+  EXPECT_EQ(s.width, 4u);
+  EXPECT_EQ(s.step, 4u);
+  EXPECT_STREQ(s.encoding, "mono8");
+  EXPECT_EQ(s.is_bigendian, 0);
+  EXPECT_STREQ(s.header.frame_id, "camera");
+  EXPECT_EQ(s.header.stamp.sec, 1'700'000'000);
+  ASSERT_EQ(s.data._length, 4u);
+  EXPECT_FALSE(s.data._release);
+  // Borrowed: the sample points into the value.
+  EXPECT_EQ(s.data._buffer, v.get_as<vision_frame>(0).data.data());
+  auto back = from<vision_frame>("sensor_msgs/msg/Image", s, 12);
+  ASSERT_TRUE(back);
+  EXPECT_EQ(back->source, "camera");
+  EXPECT_EQ(back->seq, 12u);
+  EXPECT_EQ(back->data, (std::vector<uint8_t>{1, 2, 3, 250}));
+}
+
+TEST(ros_types, an_image_from_dds_loses_its_row_padding) {
+  // 2 rows of 3 pixels, 4 bytes a row.
+  std::vector<uint8_t> px{1, 2, 3, 0, 4, 5, 6, 0};
+  sensor_msgs_msg_dds__Image_ s{};
+  s.height = 2;
+  s.width = 3;
+  s.step = 4;
+  s.encoding = const_cast<char*>("8UC1");
+  s.data = {static_cast<uint32_t>(px.size()), static_cast<uint32_t>(px.size()),
+            px.data(), false};
+  auto f = from<vision_frame>("sensor_msgs/msg/Image", s);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(f->data, (std::vector<uint8_t>{1, 2, 3, 4, 5, 6}));
+}
+
+TEST(ros_types, an_image_that_is_no_frame_is_refused_whole) {
+  std::vector<uint8_t> px(12, 7);
+  auto image = [&](const char* enc, uint32_t h, uint32_t w, uint32_t step,
+                   uint32_t len) {
+    sensor_msgs_msg_dds__Image_ s{};
+    s.height = h;
+    s.width = w;
+    s.step = step;
+    s.encoding = const_cast<char*>(enc);
+    s.data = {len, len, px.data(), false};
+    return s;
+  };
+  conversion_options o;
+  o.max_bytes = 8;
+  struct {
+    sensor_msgs_msg_dds__Image_ s;
+    const char* why;
+  } cases[] = {
+    {image("rgb8", 1, 4, 12, 12), "encoding 'rgb8'"},
+    {image("mono8", 2, 4, 3, 6), "step (3) is below its width (4)"},
+    {image("mono8", 2, 4, 4, 12), "2 rows of 4 bytes with 12 bytes"},
+    {image("mono8", 3, 4, 4, 12), "12 pixels, over 8"},
+  };
+  for (auto& c : cases) {
+    auto f = from<vision_frame>("sensor_msgs/msg/Image", c.s, 0, o);
+    ASSERT_FALSE(f) << c.why;
+    EXPECT_NE(herm::render(f.error()).find(c.why), std::string::npos)
+      << herm::render(f.error());
+  }
+  // A frame over the bound is not sent either.
+  sensor_msgs_msg_dds__Image_ out;
+  EXPECT_TRUE(to("sensor_msgs/msg/Image",
+                 caf::make_message(vision_frame{"c", 1, std::vector<uint8_t>(9)}),
+                 out, o));
 }
 
 TEST(ros_types, a_herm_value_of_another_type_is_refused) {
