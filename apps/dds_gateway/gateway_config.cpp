@@ -47,6 +47,39 @@ std::string known_types() {
 
 constexpr uint64_t max_domain = 232; // DDSI's port mapping allows 0..232
 
+/// A ROS 2 namespace ("robot1", "/fleet/robot1") as the prefix of DDS
+/// names ("fleet/robot1/"): tokens of letters, digits and '_', not starting
+/// with a digit, joined by '/'; "" and "/" are the root (no prefix).
+caf::error parse_namespace(const std::string& key, const std::string& v,
+                           std::string& prefix) {
+  auto ns = v;
+  if (!ns.empty() && ns.front() == '/')
+    ns.erase(0, 1);
+  if (!ns.empty() && ns.back() == '/')
+    ns.pop_back();
+  if (ns.size() > 200)
+    return fail(key, "expected a namespace of at most 200 bytes");
+  bool start = true;
+  for (auto c : ns) {
+    bool letter = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_';
+    bool digit = c >= '0' && c <= '9';
+    if (c == '/' && !start) {
+      start = true;
+      continue;
+    }
+    if (!letter && !(digit && !start))
+      return fail(key, "expected a ROS 2 namespace (tokens of letters, digits "
+                       "and '_', not starting with a digit, joined by '/'), "
+                       "got '" + v + "'");
+    start = false;
+  }
+  if (start && !ns.empty())
+    return fail(key, "expected a ROS 2 namespace, got '" + v
+                       + "' (an empty token)");
+  prefix = ns.empty() ? "" : ns + "/";
+  return caf::none;
+}
+
 /// One `<topic>.<field>` option into `m`.
 caf::error field(mapping& m, const std::string& key, const std::string& f,
                  const std::string& v) {
@@ -145,6 +178,7 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
   uint64_t max_string = 4096;
   uint64_t max_bytes = 60000;
   uint64_t backlog = cfg.max_backlog;
+  std::string ns; // "robot1/": the prefix of default DDS names
   // Gateway-wide options first: every mapping starts from them.
   for (auto& [key, v] : options) {
     if (key.find('.') != std::string::npos)
@@ -158,9 +192,12 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
       err = integer(key, v, 1, 60000, max_bytes);
     else if (key == "max_backlog")
       err = integer(key, v, 1, 1000000, backlog);
+    else if (key == "namespace")
+      err = parse_namespace(key, v, ns);
     else
-      err = fail(key, "unknown option (expected domain, max_string, "
-                      "max_bytes, max_backlog or <topic>.<field>)");
+      err = fail(key, "unknown option (expected domain, namespace, "
+                      "max_string, max_bytes, max_backlog or "
+                      "<topic>.<field>)");
     if (err)
       return err;
   }
@@ -188,7 +225,7 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
                            + " mappings");
       mapping m;
       m.herm_topic = topic;
-      m.dds_topic = "rt/" + topic;
+      m.dds_topic = "rt/" + ns + topic;
       m.domain = static_cast<uint32_t>(domain);
       m.conv.max_string = max_string;
       m.conv.max_bytes = max_bytes;
@@ -222,8 +259,8 @@ parse_gateway_options(const std::map<std::string, std::string>& options) {
                     "only a sensor_msgs/msg/Range mapping takes this field");
       if (!m.server && !m.apo.empty())
         return fail(topic + ".apo", "only a server mapping serves an APO");
-      if (m.dds_topic == "rt/" + topic)
-        m.dds_topic = topic;
+      if (m.dds_topic == "rt/" + ns + topic)
+        m.dds_topic = ns + topic;
       if (m.apo.empty())
         m.apo = topic;
       cfg.mappings.push_back(std::move(m));

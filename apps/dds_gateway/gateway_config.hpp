@@ -5,12 +5,14 @@
 // flat options (hermd's `apos` section; docs/gateway.md, "Configuration"):
 //
 //   domain: 0                 default domain of every mapping (0..232)
+//   namespace: robot1         ROS 2 namespace of the default DDS names:
+//                             rt/robot1/<topic>, rq/robot1/<name>Request
 //   max_string: 4096          longest string either way, bytes
 //   max_bytes: 60000          longest byte sequence either way (Image data)
 //   max_backlog: 1024         DDS samples waiting for the HERM side at most
 //   <topic>.type: sensor_msgs/msg/Range      required: makes a mapping
 //   <topic>.direction: to_dds | from_dds | both          (to_dds)
-//   <topic>.dds_topic: rt/<topic>
+//   <topic>.dds_topic: rt/[<namespace>/]<topic>
 //   <topic>.domain: <domain>
 //   <topic>.reliability: reliable | best_effort          (reliable)
 //   <topic>.depth: 10                        keep_last history depth
@@ -24,7 +26,7 @@
 //     server: the HERM APO `<name>.apo` (default <name>) is offered as the
 //             DDS service; client: a proxy APO named <name> calls the DDS
 //             service
-//   <name>.dds_service: <name>    the DDS service (rq/<..>Request, rr/<..>Reply)
+//   <name>.dds_service: [<namespace>/]<name>   the DDS service (rq/<..>Request, rr/<..>Reply)
 //   <name>.timeout_ms: 5000       a call's deadline, either way
 //   <name>.domain / reliability / depth / durability as for topics
 //

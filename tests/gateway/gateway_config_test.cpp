@@ -149,6 +149,32 @@ TEST(gateway_config, an_image_mapping_takes_a_frame_id_and_the_byte_bound) {
   EXPECT_EQ(plain->mappings[0].conv.max_bytes, 60000u);
 }
 
+// A fleet on one domain: each robot's gateway names its DDS topics and
+// services under its own namespace, as a ROS 2 node in that namespace does.
+TEST(gateway_config, a_namespace_prefixes_the_default_dds_names) {
+  auto cfg = parse_gateway_options({{"namespace", "/fleet/robot_1"},
+                                    {"sonar.type", "sensor_msgs/msg/Range"},
+                                    {"cmd.type", "geometry_msgs/msg/Twist"},
+                                    {"cmd.dds_topic", "rt/cmd_vel"},
+                                    {"add.service", "example_interfaces/srv/AddTwoInts"}});
+  ASSERT_TRUE(cfg) << herm::render(cfg.error());
+  ASSERT_EQ(cfg->mappings.size(), 3u);
+  // In topic order: add, cmd, sonar.
+  EXPECT_EQ(cfg->mappings[0].request_topic(), "rq/fleet/robot_1/addRequest");
+  EXPECT_EQ(cfg->mappings[0].reply_topic(), "rr/fleet/robot_1/addReply");
+  EXPECT_EQ(cfg->mappings[1].dds_topic, "rt/cmd_vel"); // named: as it is
+  EXPECT_EQ(cfg->mappings[2].dds_topic, "rt/fleet/robot_1/sonar");
+  // The root namespace is no prefix.
+  auto root = parse_gateway_options({{"namespace", "/"}, {"s.type", "std_msgs/msg/Int32"}});
+  ASSERT_TRUE(root);
+  EXPECT_EQ(root->mappings[0].dds_topic, "rt/s");
+  for (auto bad : {"1robot", "robot 1", "a//b", "robot-1", "a/2b"})
+    EXPECT_NE(error_of({{"namespace", bad}}).find("options.namespace: expected a ROS 2 "
+                                                  "namespace"),
+              std::string::npos)
+      << bad;
+}
+
 TEST(gateway_config, mappings_are_bounded) {
   options o;
   for (size_t i = 0; i <= max_mappings; ++i)
