@@ -25,29 +25,26 @@ std::string error_reply(const std::string& code, const std::string& message) {
 
 namespace {
 
-/// CAF's codes a user could meet, as HERM's own: an actor of this module
-/// that stopped is app_ec::unavailable, a request that timed out ec::timeout.
+/// CAF's codes as HERM's own (typed_error), but for one: the service's
+/// requests go to this module's core actors, so a receiver that is down is
+/// one of them (app_ec::unavailable). A call of an APO maps its errors with
+/// typed_error first (a receiver down is then the APO: apo_gone).
 caf::error herm_error(const caf::error& err) {
   if (err == caf::sec::request_receiver_down)
     return make_error(app_ec::unavailable,
                       "a core actor of this module (IO manager, routing agent "
                       "or application support) has stopped");
-  if (err == caf::sec::request_timeout)
-    return make_error(ec::timeout, "no answer in time");
-  return err;
+  return typed_error(err);
 }
 
-/// "no_route" for herm's errors, "timeout" for CAF's request timeout,
-/// "system.NAME" for CAF's other errors.
+/// "no_route" for herm's errors; CAF's are HERM's by then. An error of
+/// another category (none is expected) by its rendering's head.
 std::string error_code(const caf::error& raw) {
   auto err = herm_error(raw);
   if (!err)
     return "none";
   if (err.category() == caf::atom("herm"))
     return error_name(err.code());
-  if (err.category() == caf::atom("system")
-      && static_cast<caf::sec>(err.code()) == caf::sec::request_timeout)
-    return "timeout";
   auto text = render(err);
   return text.substr(0, text.find(':'));
 }

@@ -181,14 +181,14 @@ bool emit(stream_actor* self, const topic_sample& s) {
 caf::behavior stream_fun(stream_actor* self, app_support_actor apps,
                          control_actor control, module_id self_id,
                          caf::actor writer, stream_options opts) {
-  auto& st = self->state;
-  st.writer = writer;
-  st.control = std::move(control);
-  st.self_id = self_id;
-  st.opts = std::move(opts);
+  auto& init = self->state;
+  init.writer = writer;
+  init.control = std::move(control);
+  init.self_id = self_id;
+  init.opts = std::move(opts);
   self->monitor(writer);
   self->set_down_handler([self](caf::down_msg&) { self->quit(); });
-  for (auto& t : st.opts.topics)
+  for (auto& t : init.opts.topics)
     self->request(apps, std::chrono::seconds(10), atom::subscribe_v, t,
                   caf::actor_cast<caf::actor>(self), atom::sample_v)
       .then([] {},
@@ -237,13 +237,15 @@ void call_fun(caf::blocking_actor* self) {
       } else {
         return error_reply(text.error());
       }
-      ordered_json reply;
-      reply["ok"] = true;
-      reply["result"] = std::move(result);
-      return reply.dump(-1, ' ', false, json::error_handler_t::replace);
+      ordered_json out;
+      out["ok"] = true;
+      out["result"] = std::move(result);
+      return out.dump(-1, ' ', false, json::error_handler_t::replace);
     };
     self->request(apo, ms(timeout_ms), std::move(request))
-      .receive([&](caf::error& err) { reply = error_reply(err); },
+      // The APO's own errors, and CAF's about the APO (it exited, it does
+      // not take the request's types) as HERM's.
+      .receive([&](caf::error& err) { reply = error_reply(typed_error(err)); },
                caf::others >> [&](caf::message_view& x)
                                 -> caf::result<caf::message> {
                  reply = describe(x.move_content_to_message());

@@ -11,24 +11,6 @@
 
 namespace herm {
 
-caf::error typed_error(const caf::error& err) {
-  if (!err || err.category() != caf::atom("system"))
-    return err;
-  auto code = static_cast<caf::sec>(err.code());
-  switch (code) {
-    case caf::sec::request_timeout:
-      return make_error(ec::timeout, "no response in time");
-    case caf::sec::request_receiver_down:
-      return make_error(app_ec::apo_gone, "the receiver exited before it "
-                                          "answered");
-    case caf::sec::unexpected_message:
-      return make_error(ec::invalid_parameter,
-                        "the receiver does not handle a message of this type");
-    default:
-      return make_error(app_ec::unavailable, render(err));
-  }
-}
-
 // -- served_module ----------------------------------------------------------------------
 
 served_module::served_module(running_module m, control_actor service,

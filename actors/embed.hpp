@@ -28,16 +28,10 @@
 #include "actors/control.hpp"
 #include "actors/marshal.hpp"
 #include "actors/module.hpp"
+#include "actors/runtime/error.hpp"
 #include "actors/runtime/type_ids.hpp"
 
 namespace herm {
-
-/// HERM's typed error for `err`: CAF's own codes become HERM's
-/// (request_timeout: ec::timeout; request_receiver_down: app_ec::apo_gone;
-/// unexpected_message: ec::invalid_parameter; any other system.* code:
-/// app_ec::unavailable with CAF's rendering as its context); HERM's errors
-/// and none pass through.
-caf::error typed_error(const caf::error& err);
 
 // -- a module with its control service ---------------------------------------------
 

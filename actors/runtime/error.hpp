@@ -37,4 +37,13 @@ template <>
 inline constexpr error_range error_range_of<app_ec>{routing_ec_end,
                                                   app_ec_end};
 
+/// HERM's typed error for `err`: CAF's own codes become HERM's
+/// (request_timeout: ec::timeout; request_receiver_down: app_ec::apo_gone;
+/// unexpected_message: ec::invalid_parameter; any other system.* code:
+/// app_ec::unavailable with CAF's rendering as its context); HERM's errors
+/// and none pass through. The one mapping: the control service and the
+/// embedding helpers (actors/embed.hpp) use it, so a user never sees a
+/// `system.*` code from them.
+caf::error typed_error(const caf::error& err);
+
 } // namespace herm

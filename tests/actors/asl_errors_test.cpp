@@ -106,3 +106,33 @@ TEST(asl_errors, a_passed_deadline_says_why) {
 }
 
 } // namespace
+
+// The one mapping of CAF's own codes to HERM's (actors/runtime/error.hpp):
+// what the control service and the embedding helpers hand users.
+TEST(typed_error, cafs_codes_become_hermes_and_hermes_pass_through) {
+  struct row {
+    caf::error in;
+    caf::error want;
+    const char* context_has;
+  };
+  std::vector<row> rows{
+    {caf::make_error(caf::sec::request_timeout), make_error(ec::timeout),
+     "no response in time"},
+    {caf::make_error(caf::sec::request_receiver_down), make_error(app_ec::apo_gone),
+     "exited before it answered"},
+    {caf::make_error(caf::sec::unexpected_message), make_error(ec::invalid_parameter),
+     "does not handle a message of this type"},
+    {caf::make_error(caf::sec::no_such_group_module), make_error(app_ec::unavailable),
+     "no_such_group_module"},
+    {make_error(routing_ec::no_route, "far"), make_error(routing_ec::no_route), "far"},
+  };
+  // No error stays none (CAF 0.17's code() of none is not to be asked).
+  EXPECT_FALSE(typed_error(caf::error{}));
+  for (auto& r : rows) {
+    auto out = typed_error(r.in);
+    EXPECT_EQ(out.code(), r.want.code()) << render(r.in);
+    EXPECT_EQ(out.category(), r.want.category()) << render(r.in);
+    EXPECT_NE(render(out).find(r.context_has), std::string::npos) << render(out);
+  }
+}
+

@@ -67,7 +67,7 @@ TEST(control_json_reply, errors_map_to_protocol_codes_and_sentences) {
     {make_error(ec::timeout, "no reply in 5000 ms"), "timeout",
      "no reply in 5000 ms"},
     {caf::make_error(caf::sec::request_timeout), "timeout",
-     "no answer in time"},
+     "no response in time"},
     {caf::make_error(caf::sec::request_receiver_down), "unavailable",
      "a core actor of this module (IO manager, routing agent or application "
      "support) has stopped"},
@@ -80,10 +80,18 @@ TEST(control_json_reply, errors_map_to_protocol_codes_and_sentences) {
   }
 }
 
-TEST(control_json_reply, other_caf_errors_are_system_codes) {
+// A user never sees CAF's system.* codes: each is one of HERM's
+// (typed_error), the message saying what CAF said where nothing better is
+// known.
+TEST(control_json_reply, other_caf_errors_are_hermes_typed_errors) {
   EXPECT_EQ(error_reply(caf::make_error(caf::sec::unexpected_message)),
-            R"({"error":{"code":"system.unexpected_message",)"
-            R"("message":"system.unexpected_message"},"ok":false})");
+            R"({"error":{"code":"invalid_parameter",)"
+            R"("message":"the receiver does not handle a message of this type"},"ok":false})");
+  auto other = json::parse(error_reply(caf::make_error(caf::sec::invalid_argument)));
+  EXPECT_EQ(other["error"]["code"], "unavailable");
+  EXPECT_NE(other["error"]["message"].get<std::string>().find("invalid_argument"),
+            std::string::npos)
+    << other.dump();
 }
 
 TEST(control_json_reply, an_error_without_a_sentence_is_rendered) {

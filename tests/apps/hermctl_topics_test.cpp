@@ -244,6 +244,14 @@ TEST_F(hermctl_topics_test, call_reaches_any_apo_with_values_in_the_text_form) {
   EXPECT_NE(out6.find("no APO named 'nobody' answered [not_found]"),
             std::string::npos)
     << out6;
+  // An APO that does not take the request's types: HERM's typed error,
+  // never CAF's system.unexpected_message.
+  auto [rc7, out7] = run(ctl("b") + " call calculator 5");
+  EXPECT_EQ(rc7, 1);
+  EXPECT_NE(out7.find("does not handle a message of this type [invalid_parameter]"),
+            std::string::npos)
+    << out7;
+  EXPECT_EQ(out7.find("system."), std::string::npos) << out7;
 }
 
 TEST_F(hermctl_topics_test, echo_prints_a_user_type_by_field_name_learned_from_its_publisher) {

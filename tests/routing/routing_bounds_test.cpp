@@ -374,9 +374,11 @@ TEST_F(bounds_sim, route_listeners_get_one_complete_event_per_change_and_burst) 
   // A late listener gets the state now: one event per destination.
   auto late = listen(net.at(x.a).agent);
   ASSERT_EQ(late->size(), 3u);
-  for (auto& e : *late)
-    if (e.id == dest)
+  for (auto& e : *late) {
+    if (e.id == dest) {
       EXPECT_EQ(e.cost, 40 + link_cost);
+    }
+  }
   // A withdrawal reaches both.
   send(f, encoded(update{0x66, 0x1234, {entry(dest, 6, infinite_metric)}}));
   ASSERT_EQ(events->size(), 4u);

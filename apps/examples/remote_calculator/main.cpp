@@ -71,8 +71,7 @@ void say(const std::string& line) {
 // an error is a value too and reaches the caller as a caf::error. It also
 // publishes every result on the topic "calculator.results", for whoever
 // subscribed, on any module.
-caf::behavior calculator(caf::event_based_actor* self,
-                         herm::app_support_actor apps) {
+caf::behavior calculator(herm::app_support_actor apps) {
   auto compute = [](const calc_request& r) -> caf::expected<int32_t> {
     if (r.op == "+")
       return r.a + r.b;
