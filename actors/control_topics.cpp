@@ -397,6 +397,18 @@ json merge_topics(const std::vector<json>& per_module) {
         r.publishers.insert(module);
       if (t.value("local_subscribers", 0) > 0)
         r.subscribers.insert(module);
+      // What this module heard of others: modules it heard publishing,
+      // modules holding a subscription to it. So modules that did not
+      // answer (a microcontroller board has no herm.info) are listed too.
+      for (auto key : {"publishers", "remote_subscribers"}) {
+        auto& ids = t[key];
+        if (!ids.is_array())
+          continue;
+        auto& into = key[0] == 'p' ? r.publishers : r.subscribers;
+        for (auto& id : ids)
+          if (id.is_string())
+            into.insert(id.get<std::string>());
+      }
       auto type = t.value("type", std::string{});
       if (!type.empty())
         r.type = type;

@@ -71,8 +71,10 @@ json descriptions_json(const json& names);
 void learn_descriptions(const json& result);
 
 /// Merges the local topic lists of several modules ({"module": "0x40",
-/// "topics": rows} each) into one row per topic: publishers, subscribers,
-/// type.
+/// "topics": rows} each) into one row per topic: publishers (modules that
+/// publish it, and those the others heard publishing it), subscribers
+/// (modules with a local subscriber, and those holding a subscription with
+/// the others), type.
 json merge_topics(const std::vector<json>& per_module);
 
 /// One module's topic rows as JSON.

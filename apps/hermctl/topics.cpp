@@ -523,6 +523,7 @@ int cmd_play(const std::string& path, const std::string& file, double rate,
   connection c{path};
   uint64_t sent = 0;
   do {
+    auto before = sent;
     int64_t first_ns = -1;
     auto start = clock_type::now();
     b.read(only, [&](const bag_message& m) {
@@ -538,13 +539,25 @@ int cmd_play(const std::string& path, const std::string& file, double rate,
         std::this_thread::sleep_for(
           std::min<clock_type::duration>(at - clock_type::now(), 100ms));
       auto to = renamed.find(m.topic);
-      c.call({{"cmd", "publish"},
-              {"topic", to != renamed.end() ? to->second : m.topic},
-              {"payload", herm::to_hex_bytes(m.payload.data(), m.payload.size())}},
-             timeout);
+      try {
+        c.call({{"cmd", "publish"},
+                {"topic", to != renamed.end() ? to->second : m.topic},
+                {"payload", herm::to_hex_bytes(m.payload.data(), m.payload.size())}},
+               timeout);
+      } catch (const topic_failure&) {
+        // Ctrl-C while a publication waited for its reply: the way to end
+        // --loop, not a failure (that one is not counted).
+        if (interrupted)
+          return false;
+        throw;
+      }
       ++sent;
       return true;
     });
+    // A recording with nothing to play (empty, or nothing of --topics):
+    // --loop would only spin.
+    if (sent == before)
+      break;
   } while (loop && !interrupted);
   if (json_out)
     std::cout << json{{"file", file}, {"published", sent}}.dump() << std::endl;

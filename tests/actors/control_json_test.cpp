@@ -3,6 +3,7 @@
 // names of the control protocol (docs/protocol.md, "Control requests").
 
 #include "actors/control_json.hpp"
+#include "actors/control_topics.hpp"
 
 #include <gtest/gtest.h>
 
@@ -307,4 +308,41 @@ TEST(control_json_types, app_counters_have_the_protocol_names) {
                                    "acks_received", "late_duplicates",
                                    "waited_for_route", "cached_responses"}));
   EXPECT_EQ(j["reliable"]["waited_for_route"], 2);
+}
+
+// -- topic lists ---------------------------------------------------------------------------
+
+// topic list: one row per topic from every module's own rows, including
+// the modules they heard of that did not answer (a board without herm.info).
+TEST(control_topics_merge, modules_heard_of_are_listed_with_those_that_answered) {
+  std::vector<json> per_module{
+    {{"module", "0x40"},
+     {"topics", json::array({{{"topic", "sonar"}, {"publishing", true},
+                              {"local_subscribers", 0},
+                              {"remote_subscribers", json::array({"0x4E"})},
+                              {"publishers", json::array()},
+                              {"type", "herm.srf04_reading"}},
+                             {{"topic", "cmd"}, {"publishing", false},
+                              {"local_subscribers", 1},
+                              {"remote_subscribers", json::array()},
+                              {"publishers", json::array({"0xA04"})},
+                              {"type", "@i32"}}})}},
+    {{"module", "0x4E"},
+     {"topics", json::array({{{"topic", "sonar"}, {"publishing", false},
+                              {"local_subscribers", 2},
+                              {"remote_subscribers", json::array()},
+                              {"publishers", json::array({"0x40"})},
+                              {"type", ""}}})}},
+  };
+  auto rows = herm::control_topics::merge_topics(per_module);
+  ASSERT_EQ(rows.size(), 2u) << rows.dump();
+  // In topic order.
+  EXPECT_EQ(rows[0]["topic"], "cmd");
+  EXPECT_EQ(rows[0]["publishers"], json::array({"0xA04"})); // the board: heard of
+  EXPECT_EQ(rows[0]["subscribers"], json::array({"0x40"}));
+  EXPECT_EQ(rows[0]["type"], "@i32");
+  EXPECT_EQ(rows[1]["topic"], "sonar");
+  EXPECT_EQ(rows[1]["publishers"], json::array({"0x40"}));
+  EXPECT_EQ(rows[1]["subscribers"], json::array({"0x4E"}));
+  EXPECT_EQ(rows[1]["type"], "herm.srf04_reading");
 }

@@ -7,9 +7,11 @@
 
 #include <gtest/gtest.h>
 
+#include <signal.h>
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -345,6 +347,49 @@ TEST_F(hermctl_topics_test, record_then_play_into_a_fresh_subscriber_message_for
   auto [rc4, bad] = run(ctl("a") + " play " + dir_ + "/not.db");
   EXPECT_EQ(rc4, 1);
   EXPECT_NE(bad.find("not.db"), std::string::npos) << bad;
+}
+
+TEST_F(hermctl_topics_test, play_loops_over_the_chosen_topics_until_interrupted) {
+  auto file = dir_ + "/two.db";
+  auto rec = start(ctl("b") + " record -o " + file + " loop.a loop.b -n 4");
+  ASSERT_TRUE(subscribed("b", "loop.a") && subscribed("b", "loop.b"));
+  int i = 0;
+  for (auto topic : {"loop.a", "loop.b", "loop.a", "loop.b"})
+    ASSERT_EQ(run(ctl("a") + " topic pub " + topic + " " + std::to_string(++i)
+                  + " -t @i32")
+                .first,
+              0);
+  ASSERT_EQ(rec->wait(20s), 0) << rec->output();
+  // Only loop.a, again and again: 1, 3, 1, 3, ...
+  auto echo = start(ctl("b") + " topic echo loop.again -n 6");
+  ASSERT_TRUE(subscribed("b", "loop.again"));
+  auto play = start(ctl("a") + " play " + file
+                    + " --loop --topics loop.a --remap loop.a:=loop.again -r 20");
+  ASSERT_EQ(echo->wait(30s), 0) << echo->output();
+  EXPECT_EQ(echo->output(), "1\n3\n1\n3\n1\n3\n");
+  ::kill(play->pid(), SIGINT);
+  ASSERT_EQ(play->wait(10s), 0) << play->output();
+  auto lines = lines_of(play->output());
+  ASSERT_FALSE(lines.empty());
+  uint64_t played = 0;
+  ASSERT_EQ(std::sscanf(lines.back().c_str(), "played %lu messages", &played), 1)
+    << play->output();
+  // (The interrupt may cut the wait for the sixth one's reply: not counted.)
+  EXPECT_GE(played, 5u);
+  // Nothing of --topics in it: --loop ends at once instead of spinning.
+  auto [rc, none] = run(ctl("a") + " play " + file + " --loop --topics loop.c", 10s);
+  EXPECT_EQ(rc, 0) << none;
+  EXPECT_NE(none.find("played 0 messages"), std::string::npos) << none;
+}
+
+TEST_F(hermctl_topics_test, record_stops_after_its_duration) {
+  auto file = dir_ + "/quiet.db";
+  auto [rc, out] = run(ctl("b") + " record -o " + file + " nobody.publishes -d 1", 20s);
+  ASSERT_EQ(rc, 0) << out;
+  EXPECT_NE(out.find("recorded 0 messages into " + file), std::string::npos) << out;
+  auto [rc2, info] = run(hermctl + " --json record --info " + file);
+  ASSERT_EQ(rc2, 0) << info;
+  EXPECT_EQ(json::parse(info)["messages"], 0);
 }
 
 TEST_F(hermctl_topics_test, bad_values_and_topics_are_refused_clearly) {
