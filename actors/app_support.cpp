@@ -146,6 +146,15 @@ caf::expected<caf::message> unmarshal_counted(asl_impl self,
 
 namespace {
 
+/// `msg` as a local APO takes it: a raw_payload (sent through a proxy
+/// whose target turned out local) unmarshalled here; the APO answers with
+/// its own types.
+caf::expected<caf::message> for_local_apo(asl_impl self, caf::message msg) {
+  if (!msg.match_elements<raw_payload>())
+    return msg;
+  return unmarshal_counted(self, msg.get_as<raw_payload>(0).bytes);
+}
+
 // -- bindings ------------------------------------------------------------------------
 
 /// Fails every request waiting on binding `id` (or, with id 0, on module
@@ -251,8 +260,11 @@ bool send_reliable(asl_impl self, uint64_t rid, outgoing& out, time_point now) {
       st.reliable->defer(out.tx, now);
       return false;
     }
-    post(self, caf::actor_cast<caf::strong_actor_ptr>(*a),
-         std::move(out.sender), out.mid, std::move(out.msg));
+    if (auto msg = for_local_apo(self, std::move(out.msg)))
+      post(self, caf::actor_cast<caf::strong_actor_ptr>(*a),
+           std::move(out.sender), out.mid, std::move(*msg));
+    else
+      refuse(self, out.sender, out.mid, std::move(msg.error()));
     return true;
   }
   if (!reachable(self, target.module))
@@ -284,10 +296,15 @@ void send_remote(asl_impl self, uint32_t id, binding& b,
                  caf::strong_actor_ptr& sender, caf::message_id mid,
                  caf::message& msg) {
   auto& st = self->state;
-  auto payload = marshal(self->system(), msg);
+  // A raw_payload request goes as it is (marshalled elsewhere).
+  bool raw = msg.match_elements<raw_payload>();
+  auto payload = raw ? caf::expected<byte_buffer>{msg.get_as<raw_payload>(0).bytes}
+                     : marshal(self->system(), msg);
   caf::error err;
   if (!payload)
     err = std::move(payload.error());
+  else if (raw && (payload->empty() || (*payload)[0] != apo_format_version))
+    err = make_error(ec::invalid_parameter, "not an APO payload of version 1");
   else if (payload->size() > st.cfg.max_message)
     err = asl_error::too_large(payload->size(), st.cfg.max_message);
   else if ((b.reliable || mid.is_request()) && st.pending->full())
@@ -309,6 +326,7 @@ void send_remote(asl_impl self, uint32_t id, binding& b,
   out.sender = std::move(sender);
   out.mid = mid;
   out.binding = id;
+  out.raw = raw;
   out.deadline = now + st.cfg.request_timeout;
   if (!b.reliable) {
     out.tx.dst = b.target.module;
@@ -344,11 +362,15 @@ void on_forward(asl_impl self, uint32_t id, caf::strong_actor_ptr& sender,
                           + "' is bound yet (looking for one)"));
   } else if (b->target.module == st.self_id) {
     // A rebinding proxy whose match is here: hand it over unchanged.
-    if (auto a = st.apos->find(b->target.apo))
-      post(self, caf::actor_cast<caf::strong_actor_ptr>(*a),
-           std::move(sender), mid, std::move(msg));
-    else
+    auto a = st.apos->find(b->target.apo);
+    auto local = for_local_apo(self, std::move(msg));
+    if (a == nullptr)
       refuse(self, sender, mid, asl_error::apo_gone(describe(b->target)));
+    else if (!local)
+      refuse(self, sender, mid, std::move(local.error()));
+    else
+      post(self, caf::actor_cast<caf::strong_actor_ptr>(*a),
+           std::move(sender), mid, std::move(*local));
   } else if (!reachable(self, b->target.module)) {
     ++st.stats.dropped_no_route;
     refuse(self, sender, mid, asl_error::no_route_to(b->target.module));
@@ -376,6 +398,8 @@ void on_response(asl_impl self, module_id src, asl_response& r) {
     reply(caf::make_message(err));
     if (is(err, app_ec::apo_gone))
       lose_target(self, out.binding, err, err);
+  } else if (out.raw) {
+    reply(caf::make_message(raw_payload{std::move(r.payload)}));
   } else if (auto msg = unmarshal_counted(self, r.payload)) {
     reply(std::move(*msg));
   } else {

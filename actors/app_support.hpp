@@ -156,8 +156,11 @@ typename Inspector::result_type inspect(Inspector& f, topic_sample& x) {
            x.time, x.payload);
 }
 
-/// A value of a topic already marshalled (docs/protocol.md, "APO
-/// payloads"): what hermctl's topic pub and play publish.
+/// A value already marshalled (docs/protocol.md, "APO payloads"): what
+/// hermctl's topic pub and play publish, and what a proxy to a remote APO
+/// sends as it is when it is the whole request; the response then comes
+/// back as a raw_payload too, whatever its types, so that a process that
+/// does not have the APO's types (hermctl call) can still call it.
 struct raw_payload {
   byte_buffer bytes;
 };

@@ -673,9 +673,30 @@ void call_local(control_impl self, const json& req, apo_ref ref, ms timeout,
       fail_with(rp));
 }
 
+/// Calls the remote APO `ref` through a proxy with `payload` as it is
+/// (raw_payload: this process need not have the APO's types) and relays
+/// its reply in the text form.
+void call_remote(control_impl self, apo_ref ref, byte_buffer payload,
+                 ms timeout, reply_promise rp) {
+  self->request(self->state.m.apps, timeout, atom::bind_v, ref)
+    .then(
+      [=](caf::actor& proxy) mutable {
+        auto helper = control_topics::spawn_call(self->system());
+        self
+          ->request(helper, timeout + ms(1000), proxy, ref,
+                    caf::make_message(raw_payload{std::move(payload)}),
+                    static_cast<uint32_t>(timeout.count()))
+          .then([rp](std::string& reply) mutable { rp.deliver(reply); },
+                fail_with(rp));
+      },
+      fail_with(rp));
+}
+
 /// A request to the APO named "apo", wherever it runs: a local one is
-/// called here; a remote one through its module's control service (whose
-/// process knows the request's types).
+/// called here; a remote one through a proxy, as any application calls
+/// it (no remote control of its module is needed), with the request built
+/// here from the text form. Types this process does not describe are
+/// asked of that module's open herm.info first.
 void cmd_call(control_impl self, const json& req, ms timeout,
               reply_promise rp) {
   auto name = string_field(req, "apo");
@@ -705,9 +726,37 @@ void cmd_call(control_impl self, const json& req, ms timeout,
             call_local(self, req, ref, timeout, rp);
             return;
           }
-          auto rest = req;
-          rest.erase("module");
-          forward(self, ref.module, rs.self, dump(rest), timeout, rp, false);
+          std::string why;
+          auto payload = control_topics::payload_of(req, why);
+          if (why.empty()) {
+            call_remote(self, ref, std::move(payload), timeout, rp);
+            return;
+          }
+          auto names = control_topics::type_names_of(req);
+          if (names.empty()) {
+            rp.deliver(error_reply("invalid_parameter", why));
+            return;
+          }
+          // Learn what the APO's module says of the types, then try again.
+          json ask{{"cmd", "types"}, {"names", names},
+                   {"module", to_hex(ref.module)},
+                   {"timeout_ms", timeout.count()}};
+          self
+            ->request(caf::actor_cast<control_actor>(self),
+                      control_deadline(dump(ask)), dump(ask))
+            .then(
+              [=](std::string& reply) mutable {
+                auto j = json::parse(reply, nullptr, false);
+                if (!j.is_discarded() && j.value("ok", false))
+                  control_topics::learn_descriptions(j["result"]);
+                std::string again;
+                auto bytes = control_topics::payload_of(req, again);
+                if (!again.empty())
+                  rp.deliver(error_reply("invalid_parameter", again));
+                else
+                  call_remote(self, ref, std::move(bytes), timeout, rp);
+              },
+              fail_with(rp));
         },
         fail_with(rp));
   });

@@ -224,7 +224,11 @@ void call_fun(caf::blocking_actor* self) {
       result["apo"] = ref.name;
       result["module"] = to_hex(ref.module);
       result["type"] = ref.type;
-      auto payload = marshal(self->system(), msg);
+      // A remote APO called through a proxy with a raw_payload answers
+      // with one: its bytes as they came.
+      auto payload = msg.match_elements<raw_payload>()
+                       ? caf::expected<byte_buffer>{msg.get_as<raw_payload>(0).bytes}
+                       : marshal(self->system(), msg);
       if (!payload) {
         result["types"] = ordered_json::array();
         result["value"] = nullptr;
@@ -290,13 +294,7 @@ caf::actor spawn_call(caf::actor_system& sys) {
   return sys.spawn<caf::detached>(call_fun);
 }
 
-byte_buffer payload_of(const json& req, std::string& why) {
-  auto vi = req.find("value");
-  if (vi == req.end()) {
-    why = "a \"value\" is needed (the text form: a JSON value)";
-    return {};
-  }
-  auto value = ordered_json::parse(vi->dump());
+std::vector<std::string> type_names_of(const json& req) {
   std::vector<std::string> types;
   auto type = string_field(req, "type");
   for (size_t start = 0; !type.empty() && start <= type.size();) {
@@ -314,6 +312,17 @@ byte_buffer payload_of(const json& req, std::string& why) {
     types.push_back(type.substr(start, end - start));
     start = end + 1;
   }
+  return types;
+}
+
+byte_buffer payload_of(const json& req, std::string& why) {
+  auto vi = req.find("value");
+  if (vi == req.end()) {
+    why = "a \"value\" is needed (the text form: a JSON value)";
+    return {};
+  }
+  auto value = ordered_json::parse(vi->dump());
+  auto types = type_names_of(req);
   if (types.empty()) {
     auto t = default_type(value);
     if (t.empty()) {

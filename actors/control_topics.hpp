@@ -52,10 +52,16 @@ caf::actor spawn_stream(caf::actor_system& sys, app_support_actor apps,
 /// Spawns a detached actor that sends one request to an APO and answers
 /// with its reply in the text form: it takes (caf::actor apo, apo_ref,
 /// caf::message request, uint32_t timeout_ms) and replies a std::string
+/// (a request that is a raw_payload, sent through a proxy, gets a
+/// raw_payload reply, printed from its bytes)
 /// reply line ({"ok": true, "result": {...}} or an error reply). Detached
 /// because it waits for a reply of any type, which only a blocking receive
 /// can. It ends after answering.
 caf::actor spawn_call(caf::actor_system& sys);
+
+/// The type names of a request's "type" (several separated by commas; a
+/// comma inside <...> belongs to its type); empty without one.
+std::vector<std::string> type_names_of(const json& req);
 
 /// The request of a call or a publication from its "value" (text form) and
 /// "type" (a type name, or several separated by commas; default: inferred

@@ -39,6 +39,9 @@ struct outgoing {
   // -- reliable mode: what to send again, and when --
   bool reliable = false;
   bool oneway = false;
+  /// Sent as a raw_payload (marshalled elsewhere): the response goes back
+  /// as a raw_payload too, not unmarshalled here.
+  bool raw = false;
   /// The message (handed over unchanged if a rebinding proxy's new target
   /// is local) and its marshalled form.
   caf::message msg;

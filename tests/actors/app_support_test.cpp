@@ -273,6 +273,37 @@ TEST_F(asl_test, requests_cross_a_router_and_an_8_byte_mtu_link) {
   EXPECT_EQ(stats(2).oneway_delivered, 1u);
 }
 
+// A request marshalled elsewhere (hermctl call, which may not have the
+// APO's types) goes through a proxy as it is, and its response comes back
+// as raw bytes too; a raw_payload that is no APO payload is refused.
+TEST_F(asl_test, a_raw_request_through_a_proxy_gets_a_raw_response) {
+  build(3, {{{0, 1}, "ethernet"}, {{1, 2}, "can2.0"}});
+  auto log = std::make_shared<seen>();
+  add(2, "calc", "herm.example.calculator", spawn_calculator(log));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false});
+  ASSERT_TRUE(proxy) << render(proxy.error());
+  auto request = marshal(sys(), caf::make_message(int32_t{40}, int32_t{2}));
+  ASSERT_TRUE(request);
+  auto raw = ask<raw_payload>(*proxy, 1s, raw_payload{*request});
+  ASSERT_TRUE(raw) << render(raw.error());
+  auto sum = unmarshal(sys(), raw->bytes.data(), raw->bytes.size());
+  ASSERT_TRUE(sum) << render(sum.error());
+  ASSERT_TRUE(sum->match_elements<int32_t>()) << caf::to_string(*sum);
+  EXPECT_EQ(sum->get_as<int32_t>(0), 42);
+  // A request the APO does not take fails, typed, as any request does.
+  auto odd = marshal(sys(), caf::make_message(2.5));
+  ASSERT_TRUE(odd);
+  auto failed = ask<raw_payload>(*proxy, 1s, raw_payload{*odd});
+  ASSERT_FALSE(failed);
+  EXPECT_EQ(failed.error().category(), caf::atom("herm")) << render(failed.error());
+  auto bad = ask<raw_payload>(*proxy, 1s, raw_payload{byte_buffer{9, 9}});
+  ASSERT_FALSE(bad);
+  EXPECT_NE(render(bad.error()).find("not an APO payload of version 1"),
+            std::string::npos)
+    << render(bad.error());
+  EXPECT_EQ(stats(0).requests_sent, 2u); // the bad one never left
+}
+
 TEST_F(asl_test, requests_and_responses_take_the_published_routes) {
   // 0 -Ethernet- 1 -CAN (MTU 8)- 2 as above, but modules 0 and 2 send on
   // the routes their agents publish (routing/fast_routes.hpp; the

@@ -58,7 +58,8 @@ protected:
     // descriptions) goes to its open herm.info APO.
     write("a.yaml", module_yaml("a", "0x21", pa, lo(pc) + "," + lo(pb), true)
                       + "apos:\n  - name: echo\n    kind: echo\n");
-    write("b.yaml", module_yaml("b", "0x22", pb, lo(pa), false));
+    write("b.yaml", module_yaml("b", "0x22", pb, lo(pa), false)
+                      + "apos:\n  - name: echo.b\n    kind: echo\n");
     write("calc.yaml", module_yaml("calc", "0x20", pc, lo(pa), true));
     a_ = std::make_unique<child_process>(
       std::vector<std::string>{hermd, dir_ + "/a.yaml"});
@@ -220,8 +221,9 @@ TEST_F(hermctl_topics_test, call_reaches_any_apo_with_values_in_the_text_form) {
   auto j = json::parse(out2);
   EXPECT_EQ(j["module"], "0x21");
   EXPECT_EQ(j["value"].dump(), R"({"seq":3,"distance_mm":812,"echo_us":4734})");
-  // A user type only the calculator's process knows: b forwards the call
-  // to the calculator's module, whose control service builds the request.
+  // A user type only the calculator's process knows: b learns its
+  // description from the calculator's herm.info, builds the request and
+  // calls the APO through a proxy.
   auto [rc3, out3] = run(ctl("b") + " call calculator "
                          "'{\"a\":40,\"b\":2,\"op\":\"+\"}' -t calc_request");
   ASSERT_EQ(rc3, 0) << out3;
@@ -246,6 +248,11 @@ TEST_F(hermctl_topics_test, call_reaches_any_apo_with_values_in_the_text_form) {
   EXPECT_NE(out6.find("no APO named 'nobody' answered [not_found]"),
             std::string::npos)
     << out6;
+  // An APO on a module that refuses remote control (b): a call is an
+  // ordinary APO request, so a reaches it all the same.
+  auto [rc8, out8] = run(ctl("a") + " call echo.b '[1, 2]' -t @i32,@i32");
+  ASSERT_EQ(rc8, 0) << out8;
+  EXPECT_EQ(out8, "[\n  1,\n  2\n]\n");
   // An APO that does not take the request's types: HERM's typed error,
   // never CAF's system.unexpected_message.
   auto [rc7, out7] = run(ctl("b") + " call calculator 5");

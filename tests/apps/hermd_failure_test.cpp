@@ -238,10 +238,11 @@ TEST_F(hermd_failure_test, a_neighbour_with_the_holders_id_refuses_and_the_holde
   auto conflict = stats["routing"]["id_conflict"];
   // Shown while heard within the last few hello intervals; n may have
   // gone already, so either it is there with where it was heard, or null.
-  if (!conflict.is_null())
+  if (!conflict.is_null()) {
     EXPECT_NE(conflict["heard"].get<std::string>().find("channel"),
               std::string::npos)
       << conflict.dump();
+  }
   EXPECT_GE(stats["routing"]["id_conflicts"].get<int>(), 1);
   p.terminate();
   EXPECT_EQ(p.wait(10s), 0) << p.output();
