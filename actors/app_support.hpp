@@ -160,7 +160,10 @@ typename Inspector::result_type inspect(Inspector& f, topic_sample& x) {
 /// hermctl's topic pub and play publish, and what a proxy to a remote APO
 /// sends as it is when it is the whole request; the response then comes
 /// back as a raw_payload too, whatever its types, so that a process that
-/// does not have the APO's types (hermctl call) can still call it.
+/// does not have the APO's types (hermctl call) can still call it. One
+/// exception: when a rebinding proxy's target turns out to be local, the
+/// request is unmarshalled for it and the APO answers with its own types
+/// (a caller must take both).
 struct raw_payload {
   byte_buffer bytes;
 };

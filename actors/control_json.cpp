@@ -59,6 +59,13 @@ std::string error_message(const caf::error& raw) {
 
 } // namespace
 
+bool is_ok_reply(const json& reply) {
+  if (!reply.is_object())
+    return false;
+  auto i = reply.find("ok");
+  return i != reply.end() && i->is_boolean() && i->get<bool>();
+}
+
 std::string error_reply(const caf::error& err) {
   return error_reply(error_code(err), error_message(err));
 }

@@ -77,6 +77,11 @@ std::optional<module_id> module_field(const json& v);
 std::optional<uint32_t> uint_field(const json& req, const char* key,
                                    uint32_t fallback, uint32_t lo, uint32_t hi);
 
+/// True for a reply line's JSON that says {"ok": true}; false for anything
+/// else, whatever its shape (replies may come from other modules: never
+/// throws).
+bool is_ok_reply(const json& reply);
+
 /// The string field `key` of `req`; empty when absent or not a string.
 std::string string_field(const json& req, const char* key);
 

@@ -405,7 +405,7 @@ private:
     });
     auto first = ask_service(line, writer);
     auto j = json::parse(first, nullptr, false);
-    auto ok = !j.is_discarded() && j.value("ok", false);
+    auto ok = control_json::is_ok_reply(j);
     if (!write_all(fd, first + '\n', clock_type::now() + std::chrono::seconds(5))
         || !ok) {
       caf::anon_send_exit(writer, caf::exit_reason::user_shutdown);
@@ -477,7 +477,7 @@ private:
       if (here && cmd != req.end() && *cmd == "stats") {
         // This socket's own counters join the module's.
         auto j = json::parse(reply, nullptr, false);
-        if (!j.is_discarded() && j.value("ok", false)
+        if (control_json::is_ok_reply(j)
             && j["result"].is_object()) {
           j["result"]["control_socket"] = counters();
           return control_json::dump(j);

@@ -138,7 +138,7 @@ bool emit(stream_actor* self, const topic_sample& s) {
         .then(
           [done](std::string& reply) {
             auto j = json::parse(reply, nullptr, false);
-            if (!j.is_discarded() && j.value("ok", false))
+            if (is_ok_reply(j))
               learn_descriptions(j["result"]);
             done();
           },
@@ -394,31 +394,48 @@ json merge_topics(const std::vector<json>& per_module) {
     std::set<std::string> publishers, subscribers;
     std::string type;
   };
+  // The rows come from other modules (an open APO): anything of the wrong
+  // shape is passed over, never thrown on or read past.
+  auto field = [](const json& j, const char* key) -> const json* {
+    if (!j.is_object())
+      return nullptr;
+    auto i = j.find(key);
+    return i != j.end() ? &*i : nullptr;
+  };
+  auto text = [&](const json& j, const char* key) {
+    auto* v = field(j, key);
+    return v != nullptr && v->is_string() ? v->get<std::string>() : std::string{};
+  };
   std::map<std::string, row> rows;
   for (auto& m : per_module) {
-    auto module = m.value("module", std::string{});
-    auto& topics = m["topics"];
-    if (!topics.is_array())
+    auto module = text(m, "module");
+    auto* topics = field(m, "topics");
+    if (topics == nullptr || !topics->is_array())
       continue;
-    for (auto& t : topics) {
-      auto& r = rows[t.value("topic", std::string{})];
-      if (t.value("publishing", false))
+    for (auto& t : *topics) {
+      auto name = text(t, "topic");
+      if (name.empty())
+        continue;
+      auto& r = rows[name];
+      auto* publishing = field(t, "publishing");
+      if (publishing != nullptr && publishing->is_boolean() && publishing->get<bool>())
         r.publishers.insert(module);
-      if (t.value("local_subscribers", 0) > 0)
+      auto* local = field(t, "local_subscribers");
+      if (local != nullptr && local->is_number_integer() && local->get<int64_t>() > 0)
         r.subscribers.insert(module);
       // What this module heard of others: modules it heard publishing,
       // modules holding a subscription to it. So modules that did not
       // answer (a microcontroller board has no herm.info) are listed too.
       for (auto key : {"publishers", "remote_subscribers"}) {
-        auto& ids = t[key];
-        if (!ids.is_array())
+        auto* ids = field(t, key);
+        if (ids == nullptr || !ids->is_array())
           continue;
         auto& into = key[0] == 'p' ? r.publishers : r.subscribers;
-        for (auto& id : ids)
+        for (auto& id : *ids)
           if (id.is_string())
             into.insert(id.get<std::string>());
       }
-      auto type = t.value("type", std::string{});
+      auto type = text(t, "type");
       if (!type.empty())
         r.type = type;
     }

@@ -128,7 +128,8 @@ int main(int argc, char** argv) {
   int dds_domain = -1;
   app.add_flag("--dds-gateway", dds,
                "the main controller also runs a DDS / ROS 2 gateway sending "
-               "the sensor's readings to rt/sonar (sensor_msgs/msg/Range), "
+               "the sensor's readings to rt/sonar (sensor_msgs/msg/Range) "
+               "and the vision frames to rt/vision (sensor_msgs/msg/Image), "
                "and a DDS reader checks that they arrive (docs/testbed.md)");
   app.add_option("--dds-domain", dds_domain,
                  "the DDS domain of --dds-gateway (default: one of 1 .. 200 "

@@ -157,17 +157,20 @@ std::pair<int, std::string> runner::run(const std::vector<std::string>& argv,
     return {-1, "cannot run a command: no pipe"};
   // Only our end: the command's output stays a blocking pipe.
   ::fcntl(fds[0], F_SETFL, O_NONBLOCK);
+  std::vector<char*> args;
+  for (auto& a : argv)
+    args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
   auto pid = ::fork();
   if (pid == 0) {
     ::dup2(fds[1], STDOUT_FILENO);
     ::dup2(fds[1], STDERR_FILENO);
-    std::vector<char*> args;
-    for (auto& a : argv)
-      args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
     ::execvp(args[0], args.data());
     ::_exit(127);
   }
+  // A command that hangs (or a grandchild that keeps the pipe open) must
+  // not hang the run: killed after run_limit.
+  auto deadline = clock_type::now() + run_limit;
   ::close(fds[1]);
   std::string out;
   int status = 0;
@@ -188,6 +191,17 @@ std::pair<int, std::string> runner::run(const std::vector<std::string>& argv,
       open = false;
     if (!exited && ::waitpid(pid, &status, WNOHANG) == pid)
       exited = true;
+    if ((open || !exited) && clock_type::now() >= deadline) {
+      if (!exited) {
+        ::kill(pid, SIGKILL);
+        ::waitpid(pid, nullptr, 0);
+      }
+      ::close(fds[0]);
+      out += "\n(killed after " + std::to_string(run_limit.count()) + " s)";
+      if (show)
+        std::cout << "           | " << out << "\n" << std::flush;
+      return {-1, out};
+    }
     if (open || !exited)
       pump(10ms);
   }
@@ -237,17 +251,25 @@ void runner::print(const std::string& name, const std::string& line) {
 }
 
 void runner::start(child& c) {
+  // A previous life that did not exit when asked: it goes now, or two
+  // would run (two boards on one line) and this one could not be killed.
+  if (c.pid > 0) {
+    ::kill(c.pid, SIGKILL);
+    ::waitpid(c.pid, nullptr, 0);
+    c.pid = -1;
+  }
   int fds[2];
   if (::pipe2(fds, O_CLOEXEC) != 0)
     return;
+  // Built before fork: the child only calls async-signal-safe functions.
+  std::vector<char*> args;
+  for (auto& a : c.argv)
+    args.push_back(a.data());
+  args.push_back(nullptr);
   c.pid = ::fork();
   if (c.pid == 0) {
     ::dup2(fds[1], STDOUT_FILENO);
     ::dup2(fds[1], STDERR_FILENO);
-    std::vector<char*> args;
-    for (auto& a : c.argv)
-      args.push_back(a.data());
-    args.push_back(nullptr);
     ::execv(args[0], args.data());
     ::_exit(127);
   }

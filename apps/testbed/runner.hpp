@@ -41,6 +41,9 @@ struct child {
 
 class runner {
 public:
+  /// The longest a command of run() may take.
+  static constexpr std::chrono::seconds run_limit{60};
+
   /// `bin_dir`: where the testbed's programs are. `quiet`: leave lines
   /// with "packet " out of the printed trace (they are still recorded).
   runner(std::string bin_dir, bool quiet);
@@ -94,7 +97,8 @@ public:
 
   /// Runs a command to completion (hermctl; argv[0] a path or found on the
   /// PATH), printing its output indented when `show`; returns its exit
-  /// status (-1 if it did not exit, 127 if it could not start) and output.
+  /// status (-1 if it did not exit within run_limit: then it is killed;
+  /// 127 if it could not start) and output.
   /// The children's output is read (pumped) meanwhile, so that none of
   /// them blocks on a full pipe while the command waits for it.
   std::pair<int, std::string> run(const std::vector<std::string>& argv,

@@ -346,3 +346,39 @@ TEST(control_topics_merge, modules_heard_of_are_listed_with_those_that_answered)
   EXPECT_EQ(rows[1]["subscribers"], json::array({"0x4E"}));
   EXPECT_EQ(rows[1]["type"], "herm.srf04_reading");
 }
+
+// Rows come from other modules' open herm.info: rows of the wrong shape are
+// passed over, never thrown on (an exception would end the control
+// service, and hermd with it).
+TEST(control_topics_merge, rows_of_the_wrong_shape_are_passed_over) {
+  std::vector<json> per_module{
+    {{"module", "0x40"},
+     {"topics", json::array({5, "x", json::object(),
+                             {{"topic", 7}},
+                             {{"topic", "a"}, {"publishing", "yes"},
+                              {"local_subscribers", -1},
+                              {"publishers", "0x41"},
+                              {"remote_subscribers", json::array({1, "0x42"})},
+                              {"type", 3}},
+                             {{"topic", "b"}}})}},
+    {{"module", 17}, {"topics", "none"}},
+    json::array(),
+    {{"module", "0x43"}},
+  };
+  json rows;
+  ASSERT_NO_THROW(rows = herm::control_topics::merge_topics(per_module));
+  ASSERT_EQ(rows.size(), 2u) << rows.dump();
+  EXPECT_EQ(rows[0]["topic"], "a");
+  EXPECT_TRUE(rows[0]["publishers"].empty());
+  EXPECT_EQ(rows[0]["subscribers"], json::array({"0x42"}));
+  EXPECT_EQ(rows[0]["type"], "");
+  EXPECT_EQ(rows[1]["topic"], "b");
+}
+
+TEST(control_json_reply, only_an_object_with_ok_true_is_an_ok_reply) {
+  EXPECT_TRUE(is_ok_reply(json::parse(R"({"ok":true,"result":1})")));
+  for (auto text : {R"({"ok":false})", R"({"ok":"yes"})", R"({"ok":1})", "5",
+                    R"(["ok"])", R"({})", "null"})
+    EXPECT_FALSE(is_ok_reply(json::parse(text))) << text;
+  EXPECT_FALSE(is_ok_reply(json::parse("{", nullptr, false))); // discarded
+}

@@ -196,6 +196,7 @@ std::vector<std::string> take_strings(dds_entity_t reader) {
 
 TEST_F(gateway_loop_test, a_both_mapping_carries_each_value_once_each_way) {
   start({{"chat.type", "std_msgs/msg/String"}, {"chat.direction", "both"}});
+  ASSERT_TRUE(subscribed("chat")); // the gateway's HERM side is listening
   seen herm_side;
   subscribe("chat", herm_side);
   auto topic = dds_create_topic(pp_, &std_msgs_msg_dds__String__desc, "rt/chat",
@@ -205,14 +206,14 @@ TEST_F(gateway_loop_test, a_both_mapping_carries_each_value_once_each_way) {
   auto writer = dds_create_writer(pp_, topic, nullptr, nullptr);
   ASSERT_GT(reader, 0);
   ASSERT_GT(writer, 0);
-  // Both ends matched the gateway's.
+  // Both ends matched the gateway's (and each other: two each).
   ASSERT_TRUE(eventually([&] {
     dds_publication_matched_status_t p;
     dds_subscription_matched_status_t s;
     return dds_get_publication_matched_status(writer, &p) == 0
-           && p.current_count > 0
+           && p.current_count >= 2
            && dds_get_subscription_matched_status(reader, &s) == 0
-           && s.current_count > 0;
+           && s.current_count >= 2;
   }));
   // HERM -> DDS, once.
   const module_handles& h = module_.handles();
@@ -330,6 +331,8 @@ TEST_F(gateway_loop_test, every_shipped_type_crosses_dds_both_ways) {
     SCOPED_TRACE(c.type);
     auto name = "t" + std::to_string(i);
     auto& herm_side = sides[i];
+    // The gateway's own subscription first (ours would satisfy the wait).
+    ASSERT_TRUE(subscribed(name));
     subscribe_any(name, herm_side);
     auto* t = dds_gateway::find_ros_type(c.type);
     ASSERT_NE(t, nullptr);
@@ -338,15 +341,16 @@ TEST_F(gateway_loop_test, every_shipped_type_crosses_dds_both_ways) {
     ASSERT_GT(topic, 0);
     auto reader = dds_create_reader(pp_, topic, nullptr, nullptr);
     auto writer = dds_create_writer(pp_, topic, nullptr, nullptr);
+    // Our writer matches our reader and the gateway's, our reader our
+    // writer and the gateway's: two each.
     ASSERT_TRUE(eventually([&] {
       dds_publication_matched_status_t p;
       dds_subscription_matched_status_t q;
       return dds_get_publication_matched_status(writer, &p) == 0
-             && p.current_count > 0
+             && p.current_count >= 2
              && dds_get_subscription_matched_status(reader, &q) == 0
-             && q.current_count > 0;
+             && q.current_count >= 2;
     }));
-    ASSERT_TRUE(subscribed(name)); // the gateway's subscription, and ours
     const module_handles& h = module_.handles();
     caf::anon_send(h.apps, atom::publish_v, name, c.out);
     // HERM -> DDS: the sample, written straight back from our writer.
