@@ -97,9 +97,11 @@ TEST(ros_types, nothing_in_range_is_plus_infinity_both_ways) {
   sensor_msgs_msg_dds__Range_ s;
   auto v = caf::make_message(
     srf04_reading{1, herm::hermd::srf04_out_of_range, 30000});
-  ASSERT_FALSE(to("sensor_msgs/msg/Range", v, s));
+  // The sample borrows its frame_id from the options: they outlive it.
+  conversion_options o;
+  ASSERT_FALSE(to("sensor_msgs/msg/Range", v, s, o));
   EXPECT_TRUE(std::isinf(s.range) && s.range > 0);
-  auto back = from<srf04_reading>("sensor_msgs/msg/Range", s);
+  auto back = from<srf04_reading>("sensor_msgs/msg/Range", s, 0, o);
   ASSERT_TRUE(back);
   EXPECT_EQ(back->distance_mm, herm::hermd::srf04_out_of_range);
 }
@@ -131,8 +133,9 @@ TEST(ros_types, strings_over_the_bound_are_refused_both_ways) {
   conversion_options o;
   o.max_string = 8;
   std_msgs_msg_dds__String_ s;
-  ASSERT_FALSE(to("std_msgs/msg/String", caf::make_message(std::string{"12345678"}),
-                  s, o));
+  // The sample borrows the string from the value: it outlives the sample.
+  auto eight = caf::make_message(std::string{"12345678"});
+  ASSERT_FALSE(to("std_msgs/msg/String", eight, s, o));
   EXPECT_STREQ(s.data, "12345678");
   EXPECT_TRUE(to("std_msgs/msg/String",
                  caf::make_message(std::string{"123456789"}), s, o));
