@@ -298,13 +298,17 @@ void send_remote(asl_impl self, uint32_t id, binding& b,
   auto& st = self->state;
   // A raw_payload request goes as it is (marshalled elsewhere).
   bool raw = msg.match_elements<raw_payload>();
-  auto payload = raw ? caf::expected<byte_buffer>{msg.get_as<raw_payload>(0).bytes}
-                     : marshal(self->system(), msg);
+  auto payload = [&]() -> caf::expected<byte_buffer> {
+    if (!raw)
+      return marshal(self->system(), msg);
+    auto& bytes = msg.get_as<raw_payload>(0).bytes;
+    if (auto bad = check_raw(bytes))
+      return bad;
+    return bytes;
+  }();
   caf::error err;
   if (!payload)
     err = std::move(payload.error());
-  else if (raw && (payload->empty() || (*payload)[0] != apo_format_version))
-    err = make_error(ec::invalid_parameter, "not an APO payload of version 1");
   else if (payload->size() > st.cfg.max_message)
     err = asl_error::too_large(payload->size(), st.cfg.max_message);
   else if ((b.reliable || mid.is_request()) && st.pending->full())

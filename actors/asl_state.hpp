@@ -85,6 +85,14 @@ void flush(asl_impl self);
 void post(asl_impl self, const caf::strong_actor_ptr& dst,
           caf::strong_actor_ptr from, caf::message_id mid, caf::message msg);
 
+/// None if `bytes` (a raw_payload's, marshalled elsewhere) can be an APO
+/// payload of this format, else why not (ec::invalid_parameter).
+inline caf::error check_raw(const byte_buffer& bytes) {
+  if (bytes.empty() || bytes[0] != apo_format_version)
+    return make_error(ec::invalid_parameter, "not an APO payload of version 1");
+  return caf::none;
+}
+
 /// `payload` unmarshalled, or the error after counting it (rx_unknown_type
 /// or rx_malformed).
 caf::expected<caf::message> unmarshal_counted(asl_impl self,

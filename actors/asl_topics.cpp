@@ -69,8 +69,8 @@ caf::error on_publish_raw(asl_impl self, const std::string& topic,
   auto& st = self->state;
   if (auto err = asl_error::check_label("a topic", topic))
     return err;
-  if (payload.empty() || payload[0] != apo_format_version)
-    return make_error(ec::invalid_parameter, "not an APO payload of version 1");
+  if (auto err = check_raw(payload))
+    return err;
   if (payload.size() > st.cfg.max_message) {
     ++st.stats.tx_refused;
     return make_error(ec::packet_too_large,

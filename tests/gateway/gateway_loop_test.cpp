@@ -178,6 +178,19 @@ protected:
   dds_entity_t pp_ = 0;
 };
 
+/// Our writer and reader of one topic (in one participant) matched the
+/// gateway's: each matches the other and the gateway's end, two each.
+bool matched_with_the_gateway(dds_entity_t writer, dds_entity_t reader) {
+  return eventually([&] {
+    dds_publication_matched_status_t p;
+    dds_subscription_matched_status_t q;
+    return dds_get_publication_matched_status(writer, &p) == 0
+           && p.current_count >= 2
+           && dds_get_subscription_matched_status(reader, &q) == 0
+           && q.current_count >= 2;
+  });
+}
+
 /// Every string a reader holds, taken.
 std::vector<std::string> take_strings(dds_entity_t reader) {
   std::vector<std::string> out;
@@ -206,15 +219,7 @@ TEST_F(gateway_loop_test, a_both_mapping_carries_each_value_once_each_way) {
   auto writer = dds_create_writer(pp_, topic, nullptr, nullptr);
   ASSERT_GT(reader, 0);
   ASSERT_GT(writer, 0);
-  // Both ends matched the gateway's (and each other: two each).
-  ASSERT_TRUE(eventually([&] {
-    dds_publication_matched_status_t p;
-    dds_subscription_matched_status_t s;
-    return dds_get_publication_matched_status(writer, &p) == 0
-           && p.current_count >= 2
-           && dds_get_subscription_matched_status(reader, &s) == 0
-           && s.current_count >= 2;
-  }));
+  ASSERT_TRUE(matched_with_the_gateway(writer, reader));
   // HERM -> DDS, once.
   const module_handles& h = module_.handles();
   caf::anon_send(h.apps, atom::publish_v, std::string{"chat"},
@@ -341,16 +346,7 @@ TEST_F(gateway_loop_test, every_shipped_type_crosses_dds_both_ways) {
     ASSERT_GT(topic, 0);
     auto reader = dds_create_reader(pp_, topic, nullptr, nullptr);
     auto writer = dds_create_writer(pp_, topic, nullptr, nullptr);
-    // Our writer matches our reader and the gateway's, our reader our
-    // writer and the gateway's: two each.
-    ASSERT_TRUE(eventually([&] {
-      dds_publication_matched_status_t p;
-      dds_subscription_matched_status_t q;
-      return dds_get_publication_matched_status(writer, &p) == 0
-             && p.current_count >= 2
-             && dds_get_subscription_matched_status(reader, &q) == 0
-             && q.current_count >= 2;
-    }));
+    ASSERT_TRUE(matched_with_the_gateway(writer, reader));
     const module_handles& h = module_.handles();
     caf::anon_send(h.apps, atom::publish_v, name, c.out);
     // HERM -> DDS: the sample, written straight back from our writer.
