@@ -103,7 +103,8 @@ endif()
 foreach(dir actors channels routing)
   install(DIRECTORY "${PROJECT_SOURCE_DIR}/${dir}"
     DESTINATION ${HERM_INSTALL_INCLUDEDIR}
-    FILES_MATCHING PATTERN "*.hpp" PATTERN "*.def")
+    FILES_MATCHING PATTERN "*.hpp" PATTERN "*.def"
+    PATTERN "include" EXCLUDE) # actors/include/herm/herm.hpp: below, once
 endforeach()
 # The users' one header: <herm/herm.hpp> (include/herm is on the path).
 install(FILES "${PROJECT_SOURCE_DIR}/actors/include/herm/herm.hpp"

@@ -16,6 +16,7 @@
 #include <iostream>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -99,11 +100,8 @@ public:
   /// throws when the module closes the connection.
   std::optional<std::string> line(clock_type::time_point deadline) {
     for (;;) {
-      if (auto nl = buf_.find('\n'); nl != std::string::npos) {
-        auto l = buf_.substr(0, nl);
-        buf_.erase(0, nl + 1);
+      if (auto l = buffered())
         return l;
-      }
       if (interrupted)
         return std::nullopt;
       auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -112,17 +110,36 @@ public:
         return std::nullopt;
       pollfd p{fd_, POLLIN, 0};
       auto n = ::poll(&p, 1, static_cast<int>(std::min<int64_t>(left.count(), 100)));
-      if (n <= 0)
-        continue;
-      char chunk[8192];
-      auto r = ::recv(fd_, chunk, sizeof(chunk), 0);
-      if (r < 0 && errno == EINTR)
-        continue;
-      if (r <= 0)
-        throw topic_failure{exit_unreachable,
-                            "the module at " + path_ + " closed the connection"};
-      buf_.append(chunk, static_cast<size_t>(r));
+      if (n > 0)
+        fill();
     }
+  }
+
+  /// A whole line already received, if there is one.
+  std::optional<std::string> buffered() {
+    auto nl = buf_.find('\n');
+    if (nl == std::string::npos)
+      return std::nullopt;
+    auto l = buf_.substr(0, nl);
+    buf_.erase(0, nl + 1);
+    return l;
+  }
+
+  /// Reads what the socket holds (once poll said it is readable); throws
+  /// when the module closed the connection.
+  void fill() {
+    char chunk[8192];
+    auto r = ::recv(fd_, chunk, sizeof(chunk), MSG_DONTWAIT);
+    if (r < 0 && (errno == EINTR || errno == EAGAIN))
+      return;
+    if (r <= 0)
+      throw topic_failure{exit_unreachable,
+                          "the module at " + path_ + " closed the connection"};
+    buf_.append(chunk, static_cast<size_t>(r));
+  }
+
+  int fd() const noexcept {
+    return fd_;
   }
 
   /// Sends `req` and returns the reply's result; a failure for an error.
@@ -401,6 +418,41 @@ int cmd_call(const std::string& path, const std::string& apo,
   return exit_ok;
 }
 
+/// The topics every module knows of now (`topic list`'s request).
+json topics_request(std::chrono::milliseconds timeout) {
+  return {{"cmd", "topics"}, {"all", true}, {"timeout_ms", timeout.count()}};
+}
+
+std::vector<std::string> topic_names(const json& result) {
+  std::vector<std::string> names;
+  for (auto& t : result.value("topics", json::array()))
+    if (t.is_object() && t.contains("topic") && t["topic"].is_string())
+      names.push_back(t["topic"].get<std::string>());
+  return names;
+}
+
+/// Writes one stream line into the recording; false if it held no value.
+bool record_line(bag& b, const std::string& l) {
+  auto j = json::parse(l, nullptr, false);
+  if (j.is_discarded() || stream_note(j) || !j.contains("payload"))
+    return false;
+  auto payload = herm::from_hex_bytes(j.value("payload", std::string{}));
+  if (!payload)
+    return false;
+  for (auto& d : j.value("descriptions", json::array()))
+    b.describe(d.value("name", std::string{}), d.dump());
+  bag_message m;
+  m.topic = j.value("topic", std::string{});
+  auto types = j.value("types", json::array());
+  m.type = types.empty() ? std::string{} : types[0].get<std::string>();
+  m.time_ns = j.value("time_ns", int64_t{0});
+  m.publisher = std::stoull(j.value("publisher", std::string{"0"}), nullptr, 16);
+  m.seq = j.value("seq", uint32_t{0});
+  m.payload = std::move(*payload);
+  b.add(m);
+  return true;
+}
+
 int cmd_record(const std::string& path, const std::string& out,
                std::vector<std::string> topics, uint64_t count,
                double duration_s, bool json_out,
@@ -408,55 +460,92 @@ int cmd_record(const std::string& path, const std::string& out,
   catch_signals();
   if (out.empty())
     throw topic_failure{exit_usage, "record needs -o FILE (or --info FILE)"};
-  if (topics.empty()) {
+  // Without topics: every topic there is, and (as ros2 bag record -a) every
+  // topic that appears while recording, asked for again every few seconds
+  // on a connection of its own, so that the recording never waits for it.
+  const bool every = topics.empty();
+  if (every) {
     connection c{path};
-    auto r = c.call({{"cmd", "topics"}, {"all", true},
-                     {"timeout_ms", timeout.count()}},
-                    2 * timeout + 2s);
-    for (auto& t : r.value("topics", json::array()))
-      topics.push_back(t.value("topic", std::string{}));
-    if (topics.empty())
-      throw topic_failure{exit_failed, "no topics to record (name them, or "
-                                       "start their publishers first)"};
+    topics = topic_names(c.call(topics_request(timeout), 2 * timeout + 2s));
   }
   auto b = bag::create(out);
-  auto stream = open_stream(path, topics, true, timeout);
+  std::vector<std::unique_ptr<connection>> streams;
+  if (!topics.empty())
+    streams.push_back(open_stream(path, topics, true, timeout));
+  std::set<std::string> recording{topics.begin(), topics.end()};
   b.set_metadata("recorded_by", "hermctl record");
   b.set_metadata("control_socket", path);
-  std::cerr << "hermctl: recording " << topics.size() << " topic(s) into "
-            << out << '\n';
+  std::cerr << "hermctl: recording " << topics.size() << " topic(s)"
+            << (every ? " and every new one" : "") << " into " << out << '\n';
+  constexpr auto rescan_every = 2s;
+  std::unique_ptr<connection> lister;
+  auto rescan_at = clock_type::now() + rescan_every;
   uint64_t n = 0;
   auto end = duration_s > 0
                ? clock_type::now()
                    + std::chrono::duration_cast<clock_type::duration>(
                      std::chrono::duration<double>(duration_s))
                : clock_type::time_point::max();
-  while ((count == 0 || n < count) && !interrupted && clock_type::now() < end) {
-    auto l = stream->line(std::min(end, clock_type::now() + 1s));
-    if (!l)
+  auto full = [&] { return count != 0 && n >= count; };
+  // Lines already read (with a subscription's reply, say) before polling.
+  auto drain = [&] {
+    for (auto& s : streams)
+      while (!full())
+        if (auto l = s->buffered())
+          n += record_line(b, *l) ? 1 : 0;
+        else
+          break;
+  };
+  while (!full() && !interrupted && clock_type::now() < end) {
+    drain();
+    if (full())
+      break;
+    auto now = clock_type::now();
+    if (every && !lister && now >= rescan_at) {
+      lister = std::make_unique<connection>(path);
+      lister->send(topics_request(timeout));
+    }
+    std::vector<pollfd> fds;
+    for (auto& s : streams)
+      fds.push_back({s->fd(), POLLIN, 0});
+    if (lister)
+      fds.push_back({lister->fd(), POLLIN, 0});
+    auto wait = std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::min(end, now + 100ms) - now);
+    if (::poll(fds.data(), fds.size(), static_cast<int>(wait.count())) <= 0)
       continue;
-    auto j = json::parse(*l, nullptr, false);
-    if (j.is_discarded() || stream_note(j) || !j.contains("payload"))
-      continue;
-    auto payload = herm::from_hex_bytes(j.value("payload", std::string{}));
-    if (!payload)
-      continue;
-    for (auto& d : j.value("descriptions", json::array()))
-      b.describe(d.value("name", std::string{}), d.dump());
-    bag_message m;
-    m.topic = j.value("topic", std::string{});
-    auto types = j.value("types", json::array());
-    m.type = types.empty() ? std::string{} : types[0].get<std::string>();
-    m.time_ns = j.value("time_ns", int64_t{0});
-    m.publisher = std::stoull(j.value("publisher", std::string{"0"}), nullptr, 16);
-    m.seq = j.value("seq", uint32_t{0});
-    m.payload = std::move(*payload);
-    b.add(m);
-    ++n;
+    for (size_t i = 0; i < streams.size(); ++i)
+      if (fds[i].revents != 0)
+        streams[i]->fill();
+    drain();
+    if (lister && fds.back().revents != 0) {
+      lister->fill();
+      if (auto l = lister->buffered()) {
+        std::vector<std::string> fresh;
+        try {
+          for (auto& t : topic_names(lister->result_of(*l)))
+            if (recording.insert(t).second)
+              fresh.push_back(t);
+        } catch (const topic_failure& e) {
+          std::cerr << "hermctl: asking for new topics: " << e.message << '\n';
+        }
+        lister.reset();
+        rescan_at = clock_type::now() + rescan_every;
+        if (!fresh.empty()) {
+          streams.push_back(open_stream(path, fresh, true, timeout));
+          std::cerr << "hermctl: recording " << fresh.size()
+                    << " more topic(s):";
+          for (auto& t : fresh)
+            std::cerr << ' ' << t;
+          std::cerr << '\n';
+        }
+      }
+    }
   }
   b.flush();
+  std::vector<std::string> names{recording.begin(), recording.end()};
   if (json_out)
-    std::cout << json{{"file", out}, {"messages", n}, {"topics", topics}}.dump()
+    std::cout << json{{"file", out}, {"messages", n}, {"topics", names}}.dump()
               << std::endl;
   else
     std::cout << "recorded " << n << " messages into " << out << std::endl;
@@ -601,8 +690,8 @@ topic_commands::topic_commands(CLI::App& app) {
     ->required();
   call_->add_option("-t,--type", type, "its type (default: from the value)");
   record_ = app.add_subcommand("record", "record topics into an SQLite file");
-  record_->add_option("TOPIC", topics, "topics (default: every topic now "
-                                       "known)");
+  record_->add_option("TOPIC", topics, "topics (default: every topic, "
+                                       "those that appear later too)");
   record_->add_option("-o,--output", output, "the file to create");
   record_->add_option("--info", info_file, "summarise a recording instead");
   record_->add_option("-n,--count", count, "stop after N messages");

@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -387,6 +388,32 @@ TEST_F(hermctl_topics_test, play_loops_over_the_chosen_topics_until_interrupted)
   auto [rc, none] = run(ctl("a") + " play " + file + " --loop --topics loop.c", 10s);
   EXPECT_EQ(rc, 0) << none;
   EXPECT_NE(none.find("played 0 messages"), std::string::npos) << none;
+}
+
+TEST_F(hermctl_topics_test, record_without_topics_takes_those_that_appear_while_it_runs) {
+  auto file = dir_ + "/every.db";
+  ASSERT_EQ(run(ctl("a") + " topic pub every.early 1 -t @i32").first, 0);
+  child_process rec{{"/bin/sh", "-c",
+                     "exec " + ctl("b") + " record -o " + file + " -d 12 2>&1"}};
+  ASSERT_TRUE(subscribed("b", "every.early")) << rec.output();
+  // A topic born after the recording started: the recorder finds it when
+  // it asks again (every 2 s), gets its last value, then the next one.
+  ASSERT_EQ(run(ctl("a") + " topic pub every.late 2 -t @i32").first, 0);
+  ASSERT_TRUE(subscribed("b", "every.late")) << rec.output();
+  ASSERT_EQ(run(ctl("a") + " topic pub every.late 3 -t @i32").first, 0);
+  ASSERT_EQ(rec.wait(40s), 0) << rec.output();
+  EXPECT_NE(rec.output().find("and every new one"), std::string::npos)
+    << rec.output();
+  EXPECT_NE(rec.output().find("more topic(s): every.late"), std::string::npos)
+    << rec.output();
+  auto [rc, info] = run(hermctl + " --json record --info " + file);
+  ASSERT_EQ(rc, 0) << info;
+  std::map<std::string, int> counts;
+  auto j = json::parse(info);
+  for (auto& t : j["topics"])
+    counts[t["topic"].get<std::string>()] = t["count"].get<int>();
+  EXPECT_EQ(counts["every.early"], 1) << info;
+  EXPECT_EQ(counts["every.late"], 2) << info;
 }
 
 TEST_F(hermctl_topics_test, record_stops_after_its_duration) {

@@ -28,6 +28,10 @@ A marker is an HTML comment on the line(s) directly above a fenced block
   <!-- test: NAME -->             checked by tests/docs/doc_examples_test.cpp,
       whose case NAME compares the block with what the code produces (wire
       bytes, decoder errors); this checker only makes sure NAME is there.
+  <!-- session: STEP -->          a step of the user guide's worked session
+      ("Tools"): tests/docs/tools_session.py starts its modules, runs the
+      step's commands and compares what they print with the block (times
+      and rates masked); this checker only makes sure STEP is there.
   <!-- unchecked: REASON -->      deliberately not checked (a prose diagram,
       a standard tool's command line); REASON says why.
 
@@ -50,9 +54,10 @@ import tempfile
 STRICT = ["docs/architecture.md", "docs/protocol.md", "docs/user-guide.md"]
 MARK = re.compile(r"^<!-- ([a-z]+)(?::\s*(.*?))?\s*-->\s*$")
 KINDS = {"quote", "excerpt", "config", "run", "usage", "json", "test",
-         "unchecked"}
+         "session", "unchecked"}
 NEEDS_BINARIES = {"config", "run", "usage"}
 DOC_TEST = "tests/docs/doc_examples_test.cpp"
+SESSION = "tests/docs/tools_session.py"
 RUN_TIMEOUT = 20  # seconds per command; a daemon that does not stop fails
 
 
@@ -100,6 +105,11 @@ def check_json(root, paths, block):
 def check_test_name(root, name):
     if f'"{name}"' not in (root / DOC_TEST).read_text():
         raise Mismatch(f"{DOC_TEST} has no case \"{name}\"")
+
+
+def check_session_step(root, name):
+    if f'"{name}": step_{name}' not in (root / SESSION).read_text():
+        raise Mismatch(f"{SESSION} has no step \"{name}\"")
 
 
 # -- the binaries ---------------------------------------------------------
@@ -294,6 +304,8 @@ def check_block(root, bins, kind, args, body):
         check_json(root, args.split(), body)
     elif kind == "test":
         check_test_name(root, args)
+    elif kind == "session":
+        check_session_step(root, args)
     elif kind == "usage":
         check_usage(bins, body)
     elif kind == "run":
@@ -361,6 +373,7 @@ GOOD = {
     "src/j.cpp": 'j = {{"cmd", 0}, {"ok", 1}, {"result", 2}, {"info", 3}};\n',
     "src/base.yaml": "module: { id: 1 }\n",
     "tests/docs/doc_examples_test.cpp": 'case("golden")\n',
+    "tests/docs/tools_session.py": 'STEPS = {"start": step_start}\n',
     "tests/docs/fixtures/.keep": "",
 }
 BLOCKS = [  # (marker, good block, the same block planted with a mismatch)
@@ -378,6 +391,7 @@ BLOCKS = [  # (marker, good block, the same block planted with a mismatch)
     ("json: src/j.cpp", '{"cmd": "info"}\n{"ok": true, "result": 1}',
      '{"ok": true, "results": 1}'),
     ("test: golden", "01 02", None),
+    ("session: start", "$ hermctl modules", None),
     ("unchecked: a diagram", "a | b", None),
 ]
 
