@@ -2,6 +2,8 @@
 // (docs/protocol.md, "Control requests"); the JSON and the helpers they
 // use are in actors/control_topics.hpp.
 
+#include <algorithm>
+#include <chrono>
 #include <memory>
 #include <vector>
 
@@ -207,12 +209,18 @@ void cmd_call(control_impl self, const json& req, ms timeout,
             return;
           }
           // Learn what the APO's module says of the types, then try again.
+          // Both share what is left of the caller's budget after the
+          // discovery (control_deadline: timeout + discovery_ms), so the
+          // caller gets a typed timeout, never silence.
+          auto until = std::chrono::steady_clock::now() + timeout
+                       + ms(discovery_ms);
+          auto ask_timeout = std::max(ms(1), timeout / 2);
           json ask{{"cmd", "types"}, {"names", names},
                    {"module", to_hex(ref.module)},
-                   {"timeout_ms", timeout.count()}};
+                   {"timeout_ms", ask_timeout.count()}};
           self
             ->request(caf::actor_cast<control_actor>(self),
-                      control_deadline(dump(ask)), dump(ask))
+                      ask_timeout + ms(discovery_ms), dump(ask))
             .then(
               [=](std::string& reply) mutable {
                 auto j = json::parse(reply, nullptr, false);
@@ -220,10 +228,13 @@ void cmd_call(control_impl self, const json& req, ms timeout,
                   control_topics::learn_descriptions(j["result"]);
                 std::string again;
                 auto bytes = control_topics::payload_of(req, again);
+                auto left = std::chrono::duration_cast<ms>(
+                  until - std::chrono::steady_clock::now());
                 if (!again.empty())
                   rp.deliver(error_reply("invalid_parameter", again));
                 else
-                  call_remote(self, ref, std::move(bytes), timeout, rp);
+                  call_remote(self, ref, std::move(bytes),
+                              std::max(ms(1), left), rp);
               },
               fail_with(rp));
         },

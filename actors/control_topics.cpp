@@ -393,6 +393,8 @@ json merge_topics(const std::vector<json>& per_module) {
   struct row {
     std::set<std::string> publishers, subscribers;
     std::string type;
+    /// Each answering publisher's last sequence number (rates: its increase).
+    std::map<std::string, uint32_t> seqs;
   };
   // The rows come from other modules (an open APO): anything of the wrong
   // shape is passed over, never thrown on or read past.
@@ -418,8 +420,12 @@ json merge_topics(const std::vector<json>& per_module) {
         continue;
       auto& r = rows[name];
       auto* publishing = field(t, "publishing");
-      if (publishing != nullptr && publishing->is_boolean() && publishing->get<bool>())
+      if (publishing != nullptr && publishing->is_boolean() && publishing->get<bool>()) {
         r.publishers.insert(module);
+        auto* seq = field(t, "seq");
+        if (seq != nullptr && seq->is_number_unsigned() && !module.empty())
+          r.seqs[module] = seq->get<uint32_t>();
+      }
       auto* local = field(t, "local_subscribers");
       if (local != nullptr && local->is_number_integer() && local->get<int64_t>() > 0)
         r.subscribers.insert(module);
@@ -445,7 +451,8 @@ json merge_topics(const std::vector<json>& per_module) {
     out.push_back({{"topic", name},
                    {"type", r.type},
                    {"publishers", r.publishers},
-                   {"subscribers", r.subscribers}});
+                   {"subscribers", r.subscribers},
+                   {"seqs", r.seqs}});
   return out;
 }
 

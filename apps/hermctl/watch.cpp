@@ -232,6 +232,16 @@ std::vector<watch_channel> parse_channels(const json& channels) {
 std::optional<std::vector<watch_topic>> parse_topics(const json& topics) {
   if (!topics.is_array())
     return std::nullopt;
+  // Keeps at most listed_publishers names of a list; counts them all.
+  auto names = [](const json& t, const char* key, std::vector<std::string>& kept) {
+    auto i = t.find(key);
+    if (i == t.end() || !i->is_array())
+      return uint64_t{0};
+    for (auto& m : *i)
+      if (m.is_string() && kept.size() < listed_publishers)
+        kept.push_back(m.get<std::string>());
+    return static_cast<uint64_t>(i->size());
+  };
   std::vector<watch_topic> out;
   for (auto& t : topics) {
     if (!t.is_object())
@@ -239,17 +249,12 @@ std::optional<std::vector<watch_topic>> parse_topics(const json& topics) {
     watch_topic w;
     w.topic = str(t, "topic", "-");
     w.type = str(t, "type", "");
-    w.publishing = t.value("publishing", false);
-    w.seq = static_cast<uint32_t>(field(t, "seq"));
-    w.local_subscribers = field(t, "local_subscribers");
-    if (auto r = t.find("remote_subscribers"); r != t.end() && r->is_array())
-      w.remote_subscribers = r->size();
-    if (auto p = t.find("publishers"); p != t.end() && p->is_array()) {
-      w.publisher_count = p->size();
-      for (auto& m : *p)
-        if (m.is_string() && w.publishers.size() < listed_publishers)
-          w.publishers.push_back(m.get<std::string>());
-    }
+    if (auto s = t.find("seqs"); s != t.end() && s->is_object())
+      for (auto& [module, seq] : s->items())
+        if (seq.is_number_unsigned() && w.seqs.size() < max_watch_rows)
+          w.seqs[module] = seq.get<uint32_t>();
+    w.publisher_count = names(t, "publishers", w.publishers);
+    w.subscriber_count = names(t, "subscribers", w.subscribers);
     out.push_back(std::move(w));
   }
   std::sort(out.begin(), out.end(),
@@ -392,47 +397,61 @@ std::string render_frame(const watch_snapshot* prev, const watch_snapshot& cur,
   if (changes.empty())
     f.line(prev == nullptr ? "(first frame)" : "(none)");
 
-  // Topics: the rate this module publishes each at (its sequence number's
-  // increase); a module tells no receive counts per topic.
+  // Topics of every module that answered: the rate each is published at
+  // (the increase of its publishers' sequence numbers).
   f.line("");
   if (!cur.topics) {
     f.line("topics");
     f.line(cur.topics_note.empty() ? "(not available)" : cur.topics_note);
     return f.finish();
   }
-  f.line("topics (" + std::to_string(cur.topics->size()) + ")");
+  f.line("topics (" + std::to_string(cur.topics->size()) + ", from "
+         + std::to_string(cur.topic_modules) + " modules)");
+  if (!cur.topics_unanswered.empty()) {
+    std::string list;
+    for (auto& m : cur.topics_unanswered)
+      list += (list.empty() ? "" : ",") + m;
+    f.line("(no answer from " + list + ")", true);
+  }
   rows.clear();
-  // The sequence numbers of the topics the module published last time.
-  std::map<std::string, uint32_t> published;
+  std::map<std::string, const watch_topic*> before;
   if (prev != nullptr && prev->topics)
     for (auto& t : *prev->topics)
-      if (t.publishing)
-        published[t.topic] = t.seq;
+      before[t.topic] = &t;
+  auto listed = [](const std::vector<std::string>& kept, uint64_t count) {
+    std::string text;
+    for (auto& m : kept)
+      text += (text.empty() ? "" : ",") + m;
+    if (count > kept.size())
+      text += " +" + std::to_string(count - kept.size());
+    return text.empty() ? std::string{"-"} : text;
+  };
   for (auto& t : *cur.topics) {
     std::string pub_rate = "-";
-    auto p = published.find(t.topic);
-    if (t.publishing && p != published.end() && seconds > 0) {
-      char buf[32];
-      auto per_s = static_cast<double>(static_cast<uint32_t>(t.seq - p->second)) / seconds;
-      std::snprintf(buf, sizeof(buf), per_s < 100 ? "%.1f" : "%.0f", per_s);
-      pub_rate = buf;
+    auto b = before.find(t.topic);
+    if (b != before.end() && seconds > 0) {
+      uint64_t published = 0;
+      bool known = false;
+      for (auto& [module, seq] : t.seqs)
+        if (auto old = b->second->seqs.find(module); old != b->second->seqs.end()) {
+          published += static_cast<uint32_t>(seq - old->second);
+          known = true;
+        }
+      if (known) {
+        char buf[32];
+        auto per_s = static_cast<double>(published) / seconds;
+        std::snprintf(buf, sizeof(buf), per_s < 100 ? "%.1f" : "%.0f", per_s);
+        pub_rate = buf;
+      }
     }
-    std::string pubs;
-    for (auto& m : t.publishers)
-      pubs += (pubs.empty() ? "" : ",") + m;
-    if (t.publisher_count > t.publishers.size())
-      pubs += " +" + std::to_string(t.publisher_count - t.publishers.size());
-    rows.push_back({t.topic, t.type.empty() ? "-" : t.type,
-                    t.publishing ? "yes" : "no", pub_rate,
-                    std::to_string(t.local_subscribers),
-                    std::to_string(t.remote_subscribers), pubs.empty() ? "-" : pubs});
+    rows.push_back({t.topic, t.type.empty() ? "-" : t.type, pub_rate,
+                    listed(t.publishers, t.publisher_count),
+                    listed(t.subscribers, t.subscriber_count)});
   }
   if (rows.empty())
     f.line("(none)");
   else
-    f.table({"TOPIC", "TYPE", "PUBLISHING", "PUB/S", "LOCAL SUBS", "REMOTE SUBS",
-             "PUBLISHERS"},
-            rows);
+    f.table({"TOPIC", "TYPE", "PUB/S", "PUBLISHERS", "SUBSCRIBERS"}, rows);
   return f.finish();
 }
 
@@ -506,9 +525,15 @@ watch_snapshot poll(const control_fn& call, const watch_options& o,
     if (prev != nullptr)
       s.channels = prev->channels;
   }
-  auto topics = call({{"cmd", "topics"}}, o.module);
+  auto topics = call({{"cmd", "topics"}, {"all", true}}, o.module);
   if (topics.ok) {
-    s.topics = parse_topics(topics.result);
+    auto rows = topics.result.find("topics");  // end() if not an object
+    s.topics = parse_topics(rows != topics.result.end() ? *rows : json{});
+    s.topic_modules = field(topics.result, "modules");
+    if (auto u = topics.result.find("unanswered"); u != topics.result.end() && u->is_array())
+      for (auto& m : *u)
+        if (m.is_string() && s.topics_unanswered.size() < listed_publishers)
+          s.topics_unanswered.push_back(m.get<std::string>());
     if (!s.topics)
       s.topics_note = "(the module's \"topics\" reply is not a list)";
   } else {

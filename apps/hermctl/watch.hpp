@@ -2,8 +2,8 @@
 
 // `hermctl watch`: a dashboard of one module, redrawn every interval
 // (docs/user-guide.md, "watch"): the modules it routes to, its links with
-// rates and drops, the routes that changed since the last frame, and topic
-// rates.
+// rates and drops, the routes that changed since the last frame, and the
+// network's topics with their publish rates.
 //
 // The core is pure: parse_snapshot turns the module's replies into a
 // snapshot, carry_gone keeps links that disappeared visible as "down", and
@@ -63,22 +63,21 @@ struct watch_route {
   }
 };
 
-/// One topic as the watched module sees it (its "topics" reply).
+/// One topic of the network, as the watched module's merged list shows it
+/// (its "topics" reply with "all": every module that answered).
 struct watch_topic {
   std::string topic;
   /// The type of the last value seen ("" if none).
   std::string type;
-  /// This module publishes it; `seq` is its last sequence number (the
-  /// publish rate is its increase, modulo 2^32, over time).
-  bool publishing = false;
-  uint32_t seq = 0;
-  uint64_t local_subscribers = 0;
-  /// Modules holding a subscription to this module's publications.
-  uint64_t remote_subscribers = 0;
-  /// Modules heard publishing it ("0x31"), at most 4 kept.
+  /// Each publishing module that answered, with its last sequence number:
+  /// the publish rate is their increase, modulo 2^32, over time.
+  std::map<std::string, uint32_t> seqs;
+  /// Modules publishing it ("0x31"), at most 4 kept; how many in all.
   std::vector<std::string> publishers;
-  /// How many there were in all.
   uint64_t publisher_count = 0;
+  /// Modules subscribed to it, at most 4 kept; how many in all.
+  std::vector<std::string> subscribers;
+  uint64_t subscriber_count = 0;
 };
 
 /// What one poll saw.
@@ -96,11 +95,14 @@ struct watch_snapshot {
   /// Requests that failed this time, "routes: TEXT"; their sections show
   /// what the previous snapshot had.
   std::vector<std::string> errors;
-  /// From the "topics" command (issue 18, item 1), by name; nullopt when
-  /// the module does not answer it (an older module): `topics_note` then
-  /// says why.
+  /// From the "topics" command with "all" (every module's, merged), by
+  /// name; nullopt when the module does not answer it (an older module):
+  /// `topics_note` then says why.
   std::optional<std::vector<watch_topic>> topics;
   std::string topics_note;
+  /// How many modules answered for `topics`; those that did not ("0x33").
+  uint64_t topic_modules = 0;
+  std::vector<std::string> topics_unanswered;
 };
 
 /// The selected class-0 routes of a "routes" reply (all or not), by
@@ -110,8 +112,8 @@ std::vector<watch_route> parse_routes(const json& routes);
 /// The rows of a "channels" reply, by id.
 std::vector<watch_channel> parse_channels(const json& channels);
 
-/// The rows of a "topics" reply (this module's, not "all"), by topic;
-/// nullopt when it is not a list.
+/// The rows of a "topics" reply with "all" (its "topics" list), by topic;
+/// nullopt when it is not a list. Rows of the wrong shape are skipped.
 std::optional<std::vector<watch_topic>> parse_topics(const json& topics);
 
 /// Channels in `prev` whose device has no channel in `cur` are added to

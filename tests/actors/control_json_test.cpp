@@ -318,7 +318,7 @@ TEST(control_topics_merge, modules_heard_of_are_listed_with_those_that_answered)
   std::vector<json> per_module{
     {{"module", "0x40"},
      {"topics", json::array({{{"topic", "sonar"}, {"publishing", true},
-                              {"local_subscribers", 0},
+                              {"seq", 4294967295u}, {"local_subscribers", 0},
                               {"remote_subscribers", json::array({"0x4E"})},
                               {"publishers", json::array()},
                               {"type", "herm.srf04_reading"}},
@@ -345,6 +345,9 @@ TEST(control_topics_merge, modules_heard_of_are_listed_with_those_that_answered)
   EXPECT_EQ(rows[1]["publishers"], json::array({"0x40"}));
   EXPECT_EQ(rows[1]["subscribers"], json::array({"0x4E"}));
   EXPECT_EQ(rows[1]["type"], "herm.srf04_reading");
+  // Sequence numbers of the publishers that answered, for publish rates.
+  EXPECT_EQ(rows[1]["seqs"], json({{"0x40", 4294967295u}}));
+  EXPECT_EQ(rows[0]["seqs"], json::object());
 }
 
 // Rows come from other modules' open herm.info: rows of the wrong shape are
@@ -355,7 +358,8 @@ TEST(control_topics_merge, rows_of_the_wrong_shape_are_passed_over) {
     {{"module", "0x40"},
      {"topics", json::array({5, "x", json::object(),
                              {{"topic", 7}},
-                             {{"topic", "a"}, {"publishing", "yes"},
+                             {{"topic", "b"}, {"publishing", true}, {"seq", -3}},
+                             {{"topic", "a"}, {"publishing", "yes"}, {"seq", 5},
                               {"local_subscribers", -1},
                               {"publishers", "0x41"},
                               {"remote_subscribers", json::array({1, "0x42"})},
@@ -373,6 +377,8 @@ TEST(control_topics_merge, rows_of_the_wrong_shape_are_passed_over) {
   EXPECT_EQ(rows[0]["subscribers"], json::array({"0x42"}));
   EXPECT_EQ(rows[0]["type"], "");
   EXPECT_EQ(rows[1]["topic"], "b");
+  EXPECT_EQ(rows[1]["publishers"], json::array({"0x40"}));
+  EXPECT_EQ(rows[1]["seqs"], json::object());  // a negative seq is no seq
 }
 
 TEST(control_json_reply, only_an_object_with_ok_true_is_an_ok_reply) {

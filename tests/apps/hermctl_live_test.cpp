@@ -11,9 +11,11 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <thread>
 
 #include "channels/testing/loopback.hpp"
@@ -209,6 +211,11 @@ TEST_F(hermctl_live_test, watch_draws_plain_frames_with_rates_and_a_link_taken_d
   child_process a{{hermd, module("a", "0x21", {{"eth0", pa0, pb0}, {"eth1", pa1, pb1}})}};
   child_process b{{hermd, module("b", "0x22", {{"eth0", pb0, pa0}, {"eth1", pb1, pa1}})}};
   reachable("a", "0x22");
+  // b publishes a topic nobody on a subscribes to: a's dashboard shows it
+  // (every module's topics) with the rate b publishes it at.
+  child_process pub{{"/bin/sh", "-c",
+                     "exec " + ctl("--name b topic pub live.ticks 1 --rate 10")
+                       + " > /dev/null 2>&1"}};
   child_process w{{"/bin/sh", "-c", ctl("--name a watch --count 2 --interval 2") + " 2>&1"}};
   // A frame is one write: complete once its last section shows.
   ASSERT_TRUE(w.wait_for_line_containing("route changes", 15s)) << w.output();
@@ -238,7 +245,15 @@ TEST_F(hermctl_live_test, watch_draws_plain_frames_with_rates_and_a_link_taken_d
   auto eth1 = lines_starting(last, "eth1 ");
   ASSERT_EQ(eth1.size(), 1u) << last;
   EXPECT_NE(eth1[0].find(" down "), std::string::npos) << eth1[0];
-  // The topics section: "topics (0)", or a note from a module without the
-  // "topics" command.
-  EXPECT_NE(last.find("\ntopics"), std::string::npos) << last;
+  // The topics section: both modules answered; b's topic with a rate.
+  EXPECT_NE(last.find("\ntopics (1, from 2 modules)\n"), std::string::npos) << last;
+  auto ticks = lines_starting(last, "live.ticks ");
+  ASSERT_EQ(ticks.size(), 1u) << last;
+  std::istringstream row{ticks[0]};
+  std::string topic, type, rate, publishers, subscribers;
+  row >> topic >> type >> rate >> publishers >> subscribers;
+  EXPECT_EQ(type, "@i64") << ticks[0];
+  EXPECT_GT(std::atof(rate.c_str()), 0.0) << ticks[0];
+  EXPECT_EQ(publishers, "0x22") << ticks[0];
+  EXPECT_EQ(subscribers, "-") << ticks[0];
 }

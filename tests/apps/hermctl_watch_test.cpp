@@ -264,36 +264,50 @@ TEST(hermctl_watch, sections_are_bounded) {
   EXPECT_NE(frame.find("... 11 more\n"), std::string::npos) << frame.substr(0, 200);
 }
 
-TEST(hermctl_watch, topics_show_the_rate_this_module_publishes_at) {
-  auto reply = [](uint32_t seq) {
+TEST(hermctl_watch, topics_show_the_networks_topics_and_their_publish_rates) {
+  // The merged "topics" rows of "all": sonar published by two modules,
+  // one of whose counters wraps; odom by five, none of which answered.
+  auto rows = [](uint32_t a, uint32_t b) {
     return json::array(
-      {{{"topic", "sonar"}, {"publishing", true}, {"seq", seq},
-        {"local_subscribers", 0}, {"remote_subscribers", {"0x31", "0x32"}},
-        {"publishers", json::array()}, {"type", "herm::hermd::srf04_reading"}},
-       {{"topic", "odom"}, {"publishing", false}, {"seq", 0},
-        {"local_subscribers", 2}, {"remote_subscribers", json::array()},
-        {"publishers", {"0x31", "0x32", "0x33", "0x34", "0x35"}}, {"type", ""}}});
+      {{{"topic", "sonar"}, {"type", "herm::hermd::srf04_reading"},
+        {"publishers", {"0x30", "0x31"}}, {"subscribers", {"0x31", "0x32"}},
+        {"seqs", {{"0x30", a}, {"0x31", b}}}},
+       {{"topic", "odom"}, {"type", ""},
+        {"publishers", {"0x31", "0x32", "0x33", "0x34", "0x35"}},
+        {"subscribers", json::array()}, {"seqs", json::object()}},
+       "not a row",
+       {{"topic", "bad"}, {"publishers", "0x31"}, {"seqs", {{"0x31", -4}}}}});
   };
   auto before = alpha(1000);
-  before.topics = parse_topics(reply(4294967290u));
+  before.topics = parse_topics(rows(4294967290u, 100));
   auto now = alpha(3000);
-  now.topics = parse_topics(reply(14));  // wrapped: 20 messages in 2 s
+  // 20 messages from 0x30 (wrapped) and 10 from 0x31 in 2 s: 15 per second.
+  now.topics = parse_topics(rows(14, 110));
+  now.topic_modules = 2;
+  now.topics_unanswered = {"0x33"};
   ASSERT_TRUE(now.topics);
-  ASSERT_EQ(now.topics->size(), 2u);
-  EXPECT_EQ((*now.topics)[0].topic, "odom");
-  EXPECT_EQ((*now.topics)[0].publisher_count, 5u);
+  ASSERT_EQ(now.topics->size(), 3u);
+  EXPECT_EQ((*now.topics)[1].topic, "odom");
+  EXPECT_EQ((*now.topics)[1].publisher_count, 5u);
+  EXPECT_TRUE((*now.topics)[0].seqs.empty());  // "bad": no list, no seqs
   auto frame = render_frame(&before, now, frame_style{});
-  auto at = frame.find("topics (2)\n");
+  auto at = frame.find("topics (3, from 2 modules)\n");
   ASSERT_NE(at, std::string::npos) << frame;
   EXPECT_EQ(frame.substr(at),
-            "topics (2)\n"
-            "TOPIC  TYPE                        PUBLISHING  PUB/S  LOCAL SUBS  "
-            "REMOTE SUBS  PUBLISHERS\n"
-            "odom   -                           no          -      2           "
-            "0            0x31,0x32,0x33,0x34 +1\n"
-            "sonar  herm::hermd::srf04_reading  yes         10.0   0           "
-            "2            -\n"
+            "topics (3, from 2 modules)\n"
+            "(no answer from 0x33)\n"
+            "TOPIC  TYPE                        PUB/S  PUBLISHERS              "
+            "SUBSCRIBERS\n"
+            "bad    -                           -      -                       -\n"
+            "odom   -                           -      0x31,0x32,0x33,0x34 +1  -\n"
+            "sonar  herm::hermd::srf04_reading  15.0   0x30,0x31               "
+            "0x31,0x32\n"
             "\n");
+  // The first frame has no rates.
+  auto first = render_frame(nullptr, now, frame_style{});
+  EXPECT_NE(first.find("sonar  herm::hermd::srf04_reading  -      0x30,0x31"),
+            std::string::npos)
+    << first;
   EXPECT_FALSE(parse_topics(json::object()));
   EXPECT_NE(render_frame(nullptr, alpha(0), frame_style{}).find("topics\n(not available from"),
             std::string::npos);

@@ -95,7 +95,9 @@ def check_excerpt(root, path, block):
 def check_json(root, paths, block):
     text = "".join((root / p).read_text() for p in paths)
     body = "\n".join(block)
-    words = set(re.findall(r'"(\w+)"\s*:', body))
+    # Module ids used as keys ("seqs": {"0x42": 3}) are data, not names.
+    words = {w for w in re.findall(r'"(\w+)"\s*:', body)
+             if not re.fullmatch(r"0x[0-9a-fA-F]+", w)}
     words |= set(re.findall(r'"cmd"\s*:\s*"(\w+)"', body))
     missing = sorted(w for w in words if f'"{w}"' not in text)
     if missing:
