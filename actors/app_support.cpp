@@ -5,6 +5,7 @@
 // request server, discoveries, topics, reachability: asl_state.hpp) and
 // sends what they decide. Local publications are in asl_topics.cpp.
 
+#include <algorithm>
 #include <random>
 #include <variant>
 
@@ -56,11 +57,27 @@ bool send_fast(asl_impl self, module_id dst, const byte_buffer& body,
   return true;
 }
 
+/// Whether anything waits on the housekeeping tick's fine granularity:
+/// a request's deadline or retransmission, a request being served.
+bool needs_fast_tick(const asl_state& st) {
+  return st.pending->size() > 0 || st.server->serving() > 0;
+}
+
+/// The next housekeeping tick, `period` from now; any tick already on its
+/// way is superseded (its generation no longer counts).
+void schedule_tick(asl_impl self, std::chrono::milliseconds period) {
+  auto& st = self->state;
+  st.tick_fast = period <= st.cfg.tick;
+  self->delayed_send(self, period, atom::tick_v, ++st.tick_generation);
+}
+
 /// Encodes `msg` once, into the scratch buffer, and sends it by the
 /// published next hop or through the agent.
 void send_now(asl_impl self, module_id dst, const asl_message& msg,
               bool sign) {
   auto& st = self->state;
+  if (!st.tick_fast && needs_fast_tick(st))
+    schedule_tick(self, st.cfg.tick);
   st.buf.clear();
   encode(msg, st.buf);
   if (send_fast(self, dst, st.buf, sign))
@@ -567,8 +584,10 @@ void refresh_self_id(asl_impl self, F then) {
 void tick(asl_impl self) {
   auto& st = self->state;
   auto now = self->clock().now();
-  if (++st.ticks % 10 == 1)
+  if (!st.self_id_asked || now - *st.self_id_asked >= std::chrono::seconds(1)) {
+    st.self_id_asked = now;
     refresh_self_id(self, [] {});
+  }
   for (auto m : st.reach.lost(now, st.cfg.unreachable_grace))
     module_lost(self, m);
   // Deadlines.
@@ -601,7 +620,11 @@ void tick(asl_impl self) {
   st.topics->housekeep(now, st.out);
   flush(self);
   st.apos->table().expire(now, st.cfg.remote_entry_ttl);
-  self->delayed_send(self, st.cfg.tick, atom::tick_v);
+  auto searching = std::any_of(st.bindings.all().begin(), st.bindings.all().end(),
+                               [](auto& kv) { return !kv.second.bound; });
+  schedule_tick(self, needs_fast_tick(st) || searching
+                        ? st.cfg.tick
+                        : std::max(st.cfg.tick, st.cfg.idle_tick));
 }
 
 /// The routing agent ended: nothing can be sent any more. Every request
@@ -725,7 +748,7 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
     st.topics->unsubscribe(msg.source, nullptr, st.out);
     flush(self);
   });
-  self->send(self, atom::tick_v);
+  self->send(self, atom::tick_v, ++self->state.tick_generation);
   return {
     [self](atom::add, std::string& name, std::string& type,
            caf::actor& apo) -> caf::result<apo_ref> {
@@ -861,7 +884,10 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
       flush(self);
     },
     [self](atom::done, uint32_t qid) { finish_discovery(self, qid); },
-    [self](atom::tick) { tick(self); },
+    [self](atom::tick, uint64_t generation) {
+      if (generation == self->state.tick_generation)
+        tick(self);
+    },
   };
 }
 

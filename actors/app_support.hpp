@@ -352,7 +352,7 @@ using app_support_actor = caf::typed_actor<
   /// From a proxy's destructor: nobody holds binding `id` any longer.
   caf::reacts_to<atom::close, uint32_t>,
   /// A discovery's collection time is over.
-  caf::reacts_to<atom::done, uint32_t>, caf::reacts_to<atom::tick>>;
+  caf::reacts_to<atom::done, uint32_t>, caf::reacts_to<atom::tick, uint64_t>>;
 
 /// Timers and bounds of one application support actor.
 struct app_support_config {
@@ -363,6 +363,13 @@ struct app_support_config {
   std::shared_ptr<route_cell> fast_routes;
   /// Housekeeping period: request deadlines, leases, rebinding.
   std::chrono::milliseconds tick{100};
+  /// The housekeeping period while nothing needs `tick`'s granularity: no
+  /// request waiting for its answer or its retransmission, none being
+  /// served, no proxy looking for its target. Leases, watches and lost
+  /// modules are handled on it (all far coarser). A request sent while
+  /// idle brings the next tick forward to `tick` at once. Never below
+  /// `tick`.
+  std::chrono::milliseconds idle_tick{500};
   /// A request still unanswered after this fails with ec::timeout (the
   /// requester's own `request(..., timeout)` may end it sooner).
   std::chrono::milliseconds request_timeout{10000};

@@ -7,9 +7,11 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "caf/actor_clock.hpp"
 #include "caf/make_message.hpp"
 #include "caf/stateful_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
@@ -70,7 +72,13 @@ struct asl_state {
   decltype(asl_outbox::items) flushing;
   reach_table reach;
   caf::strong_actor_ptr sink;
-  uint32_t ticks = 0;
+  /// The housekeeping tick: only the tick of the latest generation counts
+  /// (an earlier one, superseded when a request brought the tick forward,
+  /// is ignored), and whether it runs at cfg.tick (else cfg.idle_tick).
+  uint64_t tick_generation = 0;
+  bool tick_fast = true;
+  /// When the module's own id was last asked of the routing agent.
+  std::optional<caf::actor_clock::time_point> self_id_asked;
   byte_buffer buf;
 };
 

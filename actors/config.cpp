@@ -418,7 +418,8 @@ public:
 
   void apps(const field& f, file_config& cfg) const {
     auto fs = entries(f.value, f.path, f.key_line, "a map",
-                      {"tick_ms", "request_timeout_ms", "unreachable_grace_ms",
+                      {"tick_ms", "idle_tick_ms", "request_timeout_ms",
+                       "unreachable_grace_ms",
                        "rebind_interval_ms", "watch_refresh_ms",
                        "subscription_lease_ms", "remote_entry_ttl_ms",
                        "max_pending"});
@@ -432,6 +433,7 @@ public:
     };
     static constexpr millis_key millis_keys[] = {
       {"apps.tick_ms", &app_support_config::tick, 1, 60'000},
+      {"apps.idle_tick_ms", &app_support_config::idle_tick, 1, 60'000},
       {"apps.request_timeout_ms", &app_support_config::request_timeout, 1, day},
       {"apps.unreachable_grace_ms", &app_support_config::unreachable_grace, 0,
        day},

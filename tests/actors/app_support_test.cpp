@@ -915,6 +915,34 @@ TEST_F(asl_reliable_test, the_sender_retransmits_with_backoff_and_drops_a_late_d
   EXPECT_EQ(copies().size(), before); // no copy after the response
 }
 
+// Idle, the housekeeping tick slows to idle_tick; a request sent then
+// brings it forward at once, so its retransmissions and deadline keep the
+// fine tick's granularity.
+TEST_F(asl_reliable_test, a_request_sent_while_idle_brings_the_slow_tick_forward) {
+  cfg.idle_tick = 2s;
+  cfg.retransmit_initial = 200ms;
+  cfg.request_timeout = 1s;
+  build_half_raw(0);
+  apo_ref target{id_of(1), 7, "calc", "t"};
+  auto res = call<caf::actor>(asl(0), atom::bind_v, target, true);
+  ASSERT_TRUE(res) << render(res.error());
+  auto proxy = std::get<0>(*res);
+  net->advance(5s + 300ms);  // idle: the next tick is up to 2 s away
+  auto answer = start_request<int32_t>(proxy, int32_t{40}, int32_t{2});
+  auto copies = [&] { return raw.received<asl_reliable_request>(); };
+  ASSERT_EQ(copies().size(), 1u);
+  net->advance(250ms);
+  EXPECT_EQ(copies().size(), 2u) << "the first retransmission waited for the idle tick";
+  // No answer: the deadline (1 s) passes on the fine tick, not the next
+  // idle one.
+  net->advance(800ms);
+  ASSERT_EQ(answer->size(), 1u);
+  ASSERT_FALSE(answer->front());
+  EXPECT_TRUE(is(answer->front().error(), ec::timeout))
+    << render(answer->front().error());
+  EXPECT_EQ(stats(0).request_timeouts, 1u);
+}
+
 TEST_F(asl_reliable_test, a_destination_gone_past_the_deadline_gives_no_route_not_sooner) {
   build(2, {{{0, 1}, "ethernet"}});
   add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));

@@ -132,6 +132,7 @@ scheduler: { policy: stealing, threads: 4, busy_poll_us: 50 }
 control: { socket: /tmp/x/main.sock }
 apps:
   tick_ms: 50
+  idle_tick_ms: 700
   request_timeout_ms: 2000
   unreachable_grace_ms: 750
   rebind_interval_ms: 300
@@ -284,6 +285,7 @@ TEST(config, parses_every_section_of_a_full_file_into_the_structs) {
   EXPECT_EQ(cfg.control_socket, "/tmp/x/main.sock");
   auto& a = cfg.module.apps;
   EXPECT_EQ(a.tick, 50ms);
+  EXPECT_EQ(a.idle_tick, 700ms);
   EXPECT_EQ(a.request_timeout, 2000ms);
   EXPECT_EQ(a.unreachable_grace, 750ms);
   EXPECT_EQ(a.rebind_interval, 300ms);
@@ -611,7 +613,7 @@ const error_case error_cases[] = {
   {"unknown_apps_key",
    lines({"module: { name: m }", "apps:", "  request_timeout: 5"}),
    "robot.yaml:3: apps.request_timeout: unknown key (expected tick_ms, "
-   "request_timeout_ms, unreachable_grace_ms, rebind_interval_ms, "
+   "idle_tick_ms, request_timeout_ms, unreachable_grace_ms, rebind_interval_ms, "
    "watch_refresh_ms, subscription_lease_ms, remote_entry_ttl_ms or "
    "max_pending)"},
   // -- channels -----------------------------------------------------------------
