@@ -319,10 +319,10 @@ TEST(config, turns_each_channel_into_a_device_with_options_as_text) {
 
 TEST(config, records_the_line_of_every_channel_and_apo) {
   auto cfg = parse_ok(full_config);
-  EXPECT_EQ(cfg.device_lines, (std::vector<int>{23, 32}));
+  EXPECT_EQ(cfg.device_lines, (std::vector<int>{24, 33}));
   ASSERT_EQ(cfg.apos.size(), 2u);
-  EXPECT_EQ(cfg.apos[0].line, 39);
-  EXPECT_EQ(cfg.apos[1].line, 43);
+  EXPECT_EQ(cfg.apos[0].line, 40);
+  EXPECT_EQ(cfg.apos[1].line, 44);
 }
 
 TEST(config, reads_apos_with_their_type_and_options) {
