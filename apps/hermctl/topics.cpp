@@ -455,7 +455,7 @@ bool record_line(bag& b, const std::string& l) {
 
 int cmd_record(const std::string& path, const std::string& out,
                std::vector<std::string> topics, uint64_t count,
-               double duration_s, bool json_out,
+               double duration_s, size_t max_subscriptions, bool json_out,
                std::chrono::milliseconds timeout) {
   catch_signals();
   if (out.empty())
@@ -473,6 +473,8 @@ int cmd_record(const std::string& path, const std::string& out,
   if (!topics.empty())
     streams.push_back(open_stream(path, topics, true, timeout));
   std::set<std::string> recording{topics.begin(), topics.end()};
+  // New topics not recorded for want of a subscription (named once).
+  std::set<std::string> skipped;
   b.set_metadata("recorded_by", "hermctl record");
   b.set_metadata("control_socket", path);
   std::cerr << "hermctl: recording " << topics.size() << " topic(s)"
@@ -524,13 +526,27 @@ int cmd_record(const std::string& path, const std::string& out,
         std::vector<std::string> fresh;
         try {
           for (auto& t : topic_names(lister->result_of(*l)))
-            if (recording.insert(t).second)
+            if (recording.count(t) == 0 && skipped.count(t) == 0)
               fresh.push_back(t);
         } catch (const topic_failure& e) {
           std::cerr << "hermctl: asking for new topics: " << e.message << '\n';
         }
         lister.reset();
         rescan_at = clock_type::now() + rescan_every;
+        // Each batch of new topics is one more control connection (a
+        // module serves 16 clients at once): at most max_subscriptions.
+        if (!fresh.empty() && streams.size() >= max_subscriptions) {
+          std::cerr << "hermctl: not recording " << fresh.size()
+                    << " new topic(s), " << streams.size()
+                    << " subscriptions open (--max-subscriptions):";
+          for (auto& t : fresh)
+            std::cerr << ' ' << t;
+          std::cerr << '\n';
+          if (skipped.size() < 4096)
+            skipped.insert(fresh.begin(), fresh.end());
+          fresh.clear();
+        }
+        recording.insert(fresh.begin(), fresh.end());
         if (!fresh.empty()) {
           streams.push_back(open_stream(path, fresh, true, timeout));
           std::cerr << "hermctl: recording " << fresh.size()
@@ -696,6 +712,10 @@ topic_commands::topic_commands(CLI::App& app) {
   record_->add_option("--info", info_file, "summarise a recording instead");
   record_->add_option("-n,--count", count, "stop after N messages");
   record_->add_option("-d,--duration", duration_s, "stop after S seconds");
+  record_->add_option("--max-subscriptions", max_subscriptions,
+                      "without topics: most control connections for the "
+                      "topics that appear while recording (default 8)")
+    ->check(CLI::Range(1, 12));
   play_ = app.add_subcommand("play", "publish a recording again with its "
                                      "timing");
   play_->add_option("FILE", file, "the recording")->required();
@@ -733,8 +753,8 @@ int topic_commands::run(const std::string& path, uint32_t timeout_ms,
     if (record_->parsed()) {
       if (!info_file.empty())
         return cmd_info(info_file, json_out);
-      return cmd_record(path, output, topics, count, duration_s, json_out,
-                        timeout);
+      return cmd_record(path, output, topics, count, duration_s,
+                        max_subscriptions, json_out, timeout);
     }
     if (play_->parsed())
       return cmd_play(path, file, play_rate, loop, topics, remaps, json_out,

@@ -58,6 +58,8 @@ private:
   std::vector<std::string> topics;
   std::string info_file;
   double duration_s = 0;
+  /// record without topics: control connections it may hold for streams.
+  size_t max_subscriptions = 8;
   std::string file;
   double play_rate = 1.0;
   bool loop = false;

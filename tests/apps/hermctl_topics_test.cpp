@@ -416,6 +416,34 @@ TEST_F(hermctl_topics_test, record_without_topics_takes_those_that_appear_while_
   EXPECT_EQ(counts["every.late"], 2) << info;
 }
 
+// Every batch of new topics costs a control connection (a module serves
+// 16 clients): past --max-subscriptions new topics are named and left out,
+// and the recording goes on.
+TEST_F(hermctl_topics_test, record_without_topics_opens_at_most_max_subscriptions) {
+  auto file = dir_ + "/bounded.db";
+  ASSERT_EQ(run(ctl("a") + " topic pub bounded.early 1 -t @i32").first, 0);
+  child_process rec{{"/bin/sh", "-c",
+                     "exec " + ctl("b") + " record -o " + file
+                       + " -d 8 --max-subscriptions 1 2>&1"}};
+  ASSERT_TRUE(subscribed("b", "bounded.early")) << rec.output();
+  ASSERT_EQ(run(ctl("a") + " topic pub bounded.late 2 -t @i32").first, 0);
+  ASSERT_TRUE(rec.wait_for_line_containing("not recording", 20s)) << rec.output();
+  ASSERT_EQ(run(ctl("a") + " topic pub bounded.early 3 -t @i32").first, 0);
+  ASSERT_EQ(rec.wait(40s), 0) << rec.output();
+  EXPECT_NE(rec.output().find("1 subscriptions open (--max-subscriptions): "
+                              "bounded.late"),
+            std::string::npos)
+    << rec.output();
+  auto [rc, info] = run(hermctl + " --json record --info " + file);
+  ASSERT_EQ(rc, 0) << info;
+  std::map<std::string, int> counts;
+  auto j = json::parse(info);
+  for (auto& t : j["topics"])
+    counts[t["topic"].get<std::string>()] = t["count"].get<int>();
+  EXPECT_EQ(counts.count("bounded.late"), 0u) << info;
+  EXPECT_EQ(counts["bounded.early"], 2) << info;
+}
+
 TEST_F(hermctl_topics_test, record_stops_after_its_duration) {
   auto file = dir_ + "/quiet.db";
   auto [rc, out] = run(ctl("b") + " record -o " + file + " nobody.publishes -d 1", 20s);
