@@ -143,6 +143,12 @@ run fragmentation fragmentation.json "$bin/bench_fragmentation" "${gbench[@]}" \
   --benchmark_out="$out/fragmentation.json"
 run routing routing_convergence.json "$bin/bench_routing_convergence" \
   --sizes $sizes --json "$out/routing_convergence.json"
+# herm-bench-rtt counts syscalls through tracefs' raw_syscalls:sys_enter;
+# a fresh machine may not have it mounted yet (root can mount it).
+if [ ! -e /sys/kernel/tracing/events/raw_syscalls ] && [ "$(id -u)" -eq 0 ]; then
+  mount -t tracefs none /sys/kernel/tracing 2>/dev/null \
+    || echo "run-all: tracefs not mounted: rtt reports no syscall counts" >&2
+fi
 run rtt rtt.json "$bin/herm-bench-rtt" "${rtt_args[@]}" --json "$out/rtt.json"
 run footprint footprint.json python3 "$root/apps/bench/hermd_footprint.py" \
   --hermd "$bin/hermd" --peer "$bin/bench_idle_peer" "${fp_args[@]}" \
