@@ -166,8 +166,13 @@ void bag::add(const bag_message& m) {
   sqlite3_bind_int64(st.s, 2, m.time_ns);
   sqlite3_bind_int64(st.s, 3, static_cast<int64_t>(m.publisher));
   sqlite3_bind_int64(st.s, 4, m.seq);
-  sqlite3_bind_blob(st.s, 5, m.payload.data(),
-                    static_cast<int>(m.payload.size()), SQLITE_TRANSIENT);
+  // An empty vector's data() may be null, which SQLite binds as NULL (the
+  // column is NOT NULL): an empty message is an empty blob.
+  if (m.payload.empty())
+    sqlite3_bind_zeroblob(st.s, 5, 0);
+  else
+    sqlite3_bind_blob(st.s, 5, m.payload.data(),
+                      static_cast<int>(m.payload.size()), SQLITE_TRANSIENT);
   if (sqlite3_step(st.s) != SQLITE_DONE)
     fail("cannot add a message");
   if (++in_transaction_ >= batch)

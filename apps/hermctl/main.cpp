@@ -299,10 +299,14 @@ int cmd_topology(client& c, const options& o) {
       for (auto& ch : c.call({{"cmd", "channels"}}, at))
         if (ch.value("routed", true))
           m.channels[ch.value("id", 0u)] = ch.value("device", std::string{});
-      for (auto& a : c.call({{"cmd", "apps"}}, at))
-        if (a.value("local", false)
-            && a.value("name", std::string{}) != "herm.control")
-          m.apos.push_back(a.value("name", std::string{}));
+      // Every module has herm.control and herm.info: the drawing shows
+      // the user's APOs only.
+      for (auto& a : c.call({{"cmd", "apps"}}, at)) {
+        auto name = a.value("name", std::string{});
+        if (a.value("local", false) && name != "herm.control"
+            && name != "herm.info")
+          m.apos.push_back(name);
+      }
       for (auto& n : rows) {
         auto other = mid_number(n["module"]);
         if (other > 0xFFFF)

@@ -26,6 +26,7 @@
 #include "actors/text_form.hpp"
 #include "apps/hermctl/bag.hpp"
 #include "apps/hermctl/format.hpp"
+#include "routing/module_id.hpp"
 
 namespace hermctl {
 
@@ -431,28 +432,6 @@ std::vector<std::string> topic_names(const json& result) {
   return names;
 }
 
-/// Writes one stream line into the recording; false if it held no value.
-bool record_line(bag& b, const std::string& l) {
-  auto j = json::parse(l, nullptr, false);
-  if (j.is_discarded() || stream_note(j) || !j.contains("payload"))
-    return false;
-  auto payload = herm::from_hex_bytes(j.value("payload", std::string{}));
-  if (!payload)
-    return false;
-  for (auto& d : j.value("descriptions", json::array()))
-    b.describe(d.value("name", std::string{}), d.dump());
-  bag_message m;
-  m.topic = j.value("topic", std::string{});
-  auto types = j.value("types", json::array());
-  m.type = types.empty() ? std::string{} : types[0].get<std::string>();
-  m.time_ns = j.value("time_ns", int64_t{0});
-  m.publisher = std::stoull(j.value("publisher", std::string{"0"}), nullptr, 16);
-  m.seq = j.value("seq", uint32_t{0});
-  m.payload = std::move(*payload);
-  b.add(m);
-  return true;
-}
-
 int cmd_record(const std::string& path, const std::string& out,
                std::vector<std::string> topics, uint64_t count,
                double duration_s, size_t max_subscriptions, bool json_out,
@@ -672,6 +651,51 @@ int cmd_play(const std::string& path, const std::string& file, double rate,
 }
 
 } // namespace
+
+bool record_line(bag& b, const std::string& l) {
+  auto j = nlohmann::ordered_json::parse(l, nullptr, false);
+  if (j.is_discarded() || !j.is_object() || stream_note(j))
+    return false;
+  auto text = [&](const char* key) -> const std::string* {
+    auto it = j.find(key);
+    return it != j.end() && it->is_string() ? &it->get_ref<const std::string&>()
+                                            : nullptr;
+  };
+  auto number = [&](const char* key, auto& out) {
+    auto it = j.find(key);
+    if (it == j.end() || !it->is_number_integer())
+      return false;
+    out = it->get<std::decay_t<decltype(out)>>();
+    return true;
+  };
+  auto payload_hex = text("payload");
+  auto topic = text("topic");
+  auto publisher = text("publisher");
+  bag_message m;
+  if (!payload_hex || !topic || !publisher || !number("time_ns", m.time_ns)
+      || !number("seq", m.seq))
+    return false;
+  auto payload = herm::from_hex_bytes(*payload_hex);
+  auto from = herm::parse_module_id(*publisher);
+  if (!payload || !from)
+    return false;
+  auto types = j.find("types");
+  if (types != j.end() && types->is_array() && !types->empty()) {
+    if (!(*types)[0].is_string())
+      return false;
+    m.type = (*types)[0].get<std::string>();
+  }
+  auto descriptions = j.find("descriptions");
+  if (descriptions != j.end() && descriptions->is_array())
+    for (auto& d : *descriptions)
+      if (d.is_object() && d.contains("name") && d["name"].is_string())
+        b.describe(d["name"].get<std::string>(), d.dump());
+  m.topic = *topic;
+  m.publisher = *from;
+  m.payload = std::move(*payload);
+  b.add(m);
+  return true;
+}
 
 topic_commands::topic_commands(CLI::App& app) {
   topic_ = app.add_subcommand("topic", "topics across the network: list, "

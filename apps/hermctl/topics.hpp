@@ -16,6 +16,16 @@ namespace hermctl {
 
 /// Ends a topic command: `message` to stderr, `status` the exit status
 /// (hermctl's: 1 failed, 2 usage, 3 no module).
+class bag;
+
+/// Adds one line of a raw topic stream (`subscribe` with `raw`,
+/// docs/protocol.md) to the recording `b`, with the type descriptions it
+/// carries. False, and nothing added, for a line that holds no value: a
+/// note of values dropped, or a line that is not JSON or lacks a field of
+/// the right type (topic, publisher as a module id, seq, time_ns, payload
+/// as hex). The stream's end with an error throws topic_failure.
+bool record_line(bag& b, const std::string& line);
+
 struct topic_failure {
   int status;
   std::string message;

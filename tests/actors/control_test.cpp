@@ -921,6 +921,9 @@ TEST_F(control_test, hermctl_prints_tables_for_people) {
     << topo.output;
   EXPECT_NE(topo.output.find("0x32\\ncharlie"), std::string::npos)
     << topo.output;
+  // The built-in APOs (herm.control, herm.info) every module has are not
+  // drawn.
+  EXPECT_EQ(topo.output.find("herm."), std::string::npos) << topo.output;
   auto dot_file = dir.path() + "/topo.dot";
   auto svg_file = dir.path() + "/topo.svg";
   auto files = hermctl({"-s", socket, "topology", "--dot", dot_file, "--svg",

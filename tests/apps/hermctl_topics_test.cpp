@@ -129,14 +129,17 @@ protected:
   }
 
   /// Waits until module `m` subscribes to `topic` (its list says so).
-  static bool subscribed(const std::string& m, const std::string& topic) {
+  /// True once `topic` has subscribers on at least `modules` modules, as
+  /// module `m` sees it.
+  static bool subscribed(const std::string& m, const std::string& topic,
+                         size_t modules = 1) {
     auto deadline = std::chrono::steady_clock::now() + 10s;
     while (std::chrono::steady_clock::now() < deadline) {
       auto [rc, out] = run(ctl(m) + " --json topic list");
       auto j = json::parse(out, nullptr, false);
       if (rc == 0 && !j.is_discarded())
         for (auto& t : j["topics"])
-          if (t["topic"] == topic && !t["subscribers"].empty())
+          if (t["topic"] == topic && t["subscribers"].size() >= modules)
             return true;
       std::this_thread::sleep_for(100ms);
     }
@@ -345,21 +348,43 @@ TEST_F(hermctl_topics_test, record_then_play_into_a_fresh_subscriber_message_for
   EXPECT_EQ(j["topics"][0]["topic"], "counted");
   EXPECT_EQ(j["topics"][0]["type"], "@i32");
   EXPECT_EQ(j["topics"][0]["count"], 5);
-  // A fresh subscriber on a topic nobody published before.
+  const int64_t recorded_span = j["end_ns"].get<int64_t>() - j["start_ns"].get<int64_t>();
+  // A fresh subscriber on a topic nobody published before, and one on the
+  // playing module that takes the raw payload too.
   auto echo = start(ctl("b") + " --json topic echo counted.replay -n 5");
-  ASSERT_TRUE(subscribed("b", "counted.replay"));
+  auto raw = start(ctl("a") + " --json topic echo counted.replay -n 5 --raw");
+  ASSERT_TRUE(subscribed("b", "counted.replay", 2));
   auto [rc2, played] = run(ctl("a") + " play " + file
-                           + " --remap counted:=counted.replay -r 10");
+                           + " --remap counted:=counted.replay -r 2");
   ASSERT_EQ(rc2, 0) << played;
   EXPECT_NE(played.find("played 5 messages"), std::string::npos) << played;
   ASSERT_EQ(echo->wait(20s), 0) << echo->output();
+  ASSERT_EQ(raw->wait(20s), 0) << raw->output();
   auto lines = lines_of(echo->output());
+  auto raw_lines = lines_of(raw->output());
   ASSERT_EQ(lines.size(), 5u) << echo->output();
+  ASSERT_EQ(raw_lines.size(), 5u) << raw->output();
   for (int i = 0; i < 5; ++i) {
     auto v = json::parse(lines[i]);
     EXPECT_EQ(v["value"], (i + 1) * 11);
     EXPECT_EQ(v["types"], json::array({"@i32"}));
+    EXPECT_FALSE(v.contains("payload")) << lines[i];
+    // --raw: the same value, and its bytes as they travelled
+    // (docs/protocol.md, "Payload layout"): version 1, one element, its
+    // type name "@i32", then the i32, little-endian.
+    auto r = json::parse(raw_lines[i]);
+    EXPECT_EQ(r["value"], (i + 1) * 11);
+    char hex[9];
+    std::snprintf(hex, sizeof hex, "%02x000000", (i + 1) * 11);
+    EXPECT_EQ(r["payload"], "01010440693332" + std::string{hex}) << raw_lines[i];
   }
+  // Played at twice the speed: the values keep their spacing, halved. Not
+  // all at once: at least 90 % of half the recorded span apart at b (the
+  // upper side depends on the machine's load and is not asserted).
+  auto played_span = json::parse(lines[4])["time_ns"].get<int64_t>()
+                     - json::parse(lines[0])["time_ns"].get<int64_t>();
+  EXPECT_GE(played_span, recorded_span * 9 / 20)
+    << "recorded over " << recorded_span << " ns, played over " << played_span;
   // record refuses to overwrite; play refuses a file that is no recording.
   auto [rc3, again] = run(ctl("b") + " record -o " + file + " counted -n 1", 10s);
   EXPECT_EQ(rc3, 1);

@@ -52,7 +52,7 @@ for f in lib/libherm_runtime.a lib/libherm_asl.a lib/libherm_module.a \
          lib/cmake/herm/hermTargets.cmake lib/cmake/herm/HermFindCAF.cmake \
          include/herm/actors/module.hpp include/herm/actors/runtime/type_ids.hpp \
          include/herm/channels/link_kinds.def include/herm/channels/drivers/udp_addr.hpp \
-         include/herm/routing/routing_agent.hpp; do
+         include/herm/routing/routing_agent.hpp include/herm/herm/herm.hpp; do
   expect_file "$f"
 done
 if [ -e "$prefix/bin/hermd" ]; then
