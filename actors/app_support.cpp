@@ -497,7 +497,7 @@ void withdraw(asl_impl self, uint32_t apo, const caf::error& reason) {
 
 void on_packet(asl_impl self, packet_delivered& pkt) {
   auto& st = self->state;
-  auto msg = decode_asl(pkt.payload.data(), pkt.payload.size());
+  auto msg = decode_asl(std::move(pkt.payload));
   auto src = pkt.src;
   if (!msg || !is_unicast(src)) {
     ++st.stats.rx_malformed;

@@ -239,6 +239,9 @@ struct reader {
   le_reader in;
   /// The answer entry being read, from 1; 0 outside entries.
   size_t entry = 0;
+  /// The buffer `in` reads, when the payload may take it over (the
+  /// payload is the last field: nothing is read after it).
+  byte_buffer* whole = nullptr;
 
   size_t left() const noexcept {
     return in.left();
@@ -282,6 +285,14 @@ struct reader {
 
   /// The last field: the rest of the message.
   caf::error field(const char*, byte_buffer& x) {
+    if (whole != nullptr && in.ok()) {
+      auto at = in.pos();
+      (void) in.bytes(in.left()); // at the end, as rest() leaves it
+      x = std::move(*whole);
+      whole = nullptr;
+      x.erase(x.begin(), x.begin() + static_cast<ptrdiff_t>(at));
+      return caf::none;
+    }
     in.rest(x);
     return caf::none;
   }
@@ -460,11 +471,15 @@ caf::expected<asl_kind> peek_asl_kind(const uint8_t* data, size_t size) {
   return static_cast<asl_kind>(kind);
 }
 
-caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size) {
+namespace {
+
+caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size,
+                                      byte_buffer* whole) {
   auto kind = peek_asl_kind(data, size);
   if (!kind)
     return std::move(kind.error());
   reader r{name_of(*kind), le_reader{data, size, head_size}};
+  r.whole = whole;
   switch (*kind) {
     case asl_kind::query:
       return decode_as<asl_query>(r);
@@ -496,6 +511,16 @@ caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size) {
       return decode_as<asl_ack>(r);
   }
   return bad("asl", "unknown kind " + num(data[1])); // not reached
+}
+
+} // namespace
+
+caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size) {
+  return decode_asl(data, size, nullptr);
+}
+
+caf::expected<asl_message> decode_asl(byte_buffer&& message) {
+  return decode_asl(message.data(), message.size(), &message);
 }
 
 // -- equality --------------------------------------------------------------------

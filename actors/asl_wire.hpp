@@ -197,6 +197,12 @@ void encode(const asl_message& x, byte_buffer& out);
 /// What decodes re-encodes to exactly the same bytes.
 caf::expected<asl_message> decode_asl(const uint8_t* data, size_t size);
 
+/// The same, taking the whole message: a kind that ends in a payload
+/// (request, response, reliable request, publish) gets `message` itself as
+/// its payload, the bytes before it cut off in place, so the payload is not
+/// copied. `message` is left as it was on an error and for the other kinds.
+caf::expected<asl_message> decode_asl(byte_buffer&& message);
+
 /// The kind of an encoded message, for counters; error on an empty or
 /// unknown-version input or an unknown kind.
 caf::expected<asl_kind> peek_asl_kind(const uint8_t* data, size_t size);

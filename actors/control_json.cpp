@@ -178,7 +178,8 @@ json to_json(const routing_stats& s) {
           {"flood_ids_evicted", s.flood_ids_evicted},
           {"sources_evicted", s.sources_evicted},
           {"fast_sent", s.fast_sent},
-          {"fast_routes_refused", s.fast_routes_refused}};
+          {"fast_routes_refused", s.fast_routes_refused},
+          {"fast_delivered", s.fast_delivered}};
 }
 
 json to_json(const app_support_stats& s) {

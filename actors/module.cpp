@@ -67,7 +67,16 @@ caf::expected<module_handles> start_module(caf::actor_system& sys,
                                            const module_config& cfg,
                                            std::chrono::milliseconds timeout) {
   module_handles m;
-  m.io = spawn_io_manager(sys);
+  // The agent publishes its established routes and its receivers;
+  // application support sends on them, and the channels hand packets for
+  // those receivers straight to them (routing/fast_routes.hpp).
+  auto routing = cfg.routing;
+  auto apps = cfg.apps;
+  if (!routing.fast_routes)
+    routing.fast_routes = std::make_shared<route_cell>();
+  apps.fast_routes = routing.fast_routes;
+  m.io = spawn_io_manager(sys, {},
+                          std::make_shared<fast_receiver>(routing.fast_routes));
   caf::scoped_actor self{sys};
   caf::error err;
   for (size_t i = 0; i < cfg.devices.size(); ++i) {
@@ -93,13 +102,6 @@ caf::expected<module_handles> start_module(caf::actor_system& sys,
     }
   }
   // The agent subscribes to the IO manager and learns the open channels.
-  // The agent publishes its established routes, application support
-  // sends on them (routing/fast_routes.hpp).
-  auto routing = cfg.routing;
-  auto apps = cfg.apps;
-  if (!routing.fast_routes)
-    routing.fast_routes = std::make_shared<route_cell>();
-  apps.fast_routes = routing.fast_routes;
   m.agent = spawn_routing_agent(sys, m.io, std::move(routing));
   m.apps = spawn_app_support(sys, m.agent, std::move(apps));
   m.supervisor = sys.spawn(supervisor, cfg.on_failure);

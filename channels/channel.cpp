@@ -50,6 +50,7 @@ struct channel_state {
   link_addr peer = broadcast_addr;
   std::unique_ptr<packet_port> port;
   std::vector<channel_reader_actor> readers;
+  packet_tap_ptr tap;
   std::set<link_addr> peers;
   channel_stats stats;
   byte_buffer rx_buf;
@@ -117,6 +118,12 @@ private:
 
 using channel_impl = channel_self*;
 
+} // namespace
+
+packet_tap::~packet_tap() = default;
+
+namespace {
+
 void deliver(channel_impl self, link_addr src) {
   auto& st = self->state;
   ++st.stats.rx_packets;
@@ -124,6 +131,11 @@ void deliver(channel_impl self, link_addr src) {
   auto& readers = st.readers;
   if (readers.empty())
     return;
+  if (readers.size() == 1 && st.tap != nullptr
+      && st.tap->take(st.info.id, src, st.rx_buf)) {
+    st.rx_buf.clear(); // whatever take() left of it is reused
+    return;
+  }
   // Copy for all readers but the last, which gets the buffer itself.
   for (size_t i = 0; i + 1 < readers.size(); ++i)
     self->send(readers[i], packet_received{st.info.id, src, st.rx_buf});
@@ -259,6 +271,7 @@ channel_actor::behavior_type channel_fun(channel_impl self,
   init.counters = std::move(setup.counters);
   init.rx_queue = std::move(setup.rx_queue);
   init.peer = setup.peer;
+  init.tap = std::move(setup.tap);
   init.port = std::move(*port);
   init.info.max_packet = init.port->max_packet();
   init.backlog = tx_backlog{backlog_bound(init.driver->profile())};
@@ -402,6 +415,13 @@ channel_actor::behavior_type channel_fun(channel_impl self,
           break;
         case packet_port::rx::dropped:
           break;
+      }
+      // The frame's buffer, allocated by the device for this frame, holds
+      // the next packet (a packet is at most as long as the frame that
+      // carries it whole): one allocation per received frame, not two.
+      if (st.rx_buf.capacity() < msg.bytes.capacity()) {
+        msg.bytes.clear();
+        st.rx_buf.swap(msg.bytes);
       }
     },
     [self](link_event& ev) {

@@ -11,6 +11,7 @@
 #include "channels/device_actor.hpp"
 #include "channels/fragmentation.hpp"
 #include "channels/link_driver.hpp"
+#include "channels/packet_tap.hpp"
 
 namespace herm {
 
@@ -95,6 +96,8 @@ struct channel_setup {
   reassembly_limits limits;
   /// The device, monitored: the channel ends with it.
   device_actor device;
+  /// Sees each packet before the reader does (channels/packet_tap.hpp).
+  packet_tap_ptr tap;
 };
 
 /// Spawns a channel actor. Used by device actors only; clients open channels

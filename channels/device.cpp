@@ -152,6 +152,7 @@ struct device_state {
   std::shared_ptr<device_counters> counters;
   std::shared_ptr<demux> frames;
   std::map<caf::actor_addr, channel_actor> channels;
+  packet_tap_ptr tap;
 
   ~device_state() {
     // The driver's thread must not outlive the actor it reports to.
@@ -177,9 +178,10 @@ void shut_down(device_impl self, const caf::error& reason) {
 device_actor::behavior_type
 device_fun(device_impl self, device_config cfg, link_driver_ptr driver,
            std::shared_ptr<device_counters> counters,
-           std::shared_ptr<demux> frames) {
+           std::shared_ptr<demux> frames, packet_tap_ptr tap) {
   {
     auto& st = self->state;
+    st.tap = std::move(tap);
     st.config = std::move(cfg);
     st.driver = std::move(driver);
     st.counters = std::move(counters);
@@ -222,6 +224,7 @@ device_fun(device_impl self, device_config cfg, link_driver_ptr driver,
       setup.counters = st.counters;
       setup.peer = peer;
       setup.device = self;
+      setup.tap = st.tap;
       auto queue = setup.rx_queue;
       auto ch = spawn_channel(self->system(), std::move(setup));
       self->monitor(ch);
@@ -252,7 +255,8 @@ device_fun(device_impl self, device_config cfg, link_driver_ptr driver,
 } // namespace
 
 caf::expected<device_actor> spawn_device(caf::actor_system& sys,
-                                         const device_config& cfg) {
+                                         const device_config& cfg,
+                                         packet_tap_ptr tap) {
   auto* kind = find_link_kind(cfg.kind);
   if (kind == nullptr) {
     std::string known;
@@ -275,7 +279,8 @@ caf::expected<device_actor> spawn_device(caf::actor_system& sys,
   auto frames = std::make_shared<demux>(counters);
   if (auto err = (*driver)->start(frames, io_loop_of(sys)))
     return err;
-  auto dev = sys.spawn(device_fun, cfg, *driver, counters, frames);
+  auto dev = sys.spawn(device_fun, cfg, *driver, counters, frames,
+                       std::move(tap));
   frames->set_device(dev);
   return dev;
 }

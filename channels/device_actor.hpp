@@ -12,6 +12,7 @@
 #include "channels/atoms.hpp"
 #include "channels/channel_actor.hpp"
 #include "channels/messages.hpp"
+#include "channels/packet_tap.hpp"
 
 namespace herm {
 
@@ -47,7 +48,9 @@ using device_actor = caf::typed_actor<
 
 /// Opens `cfg` with its link kind and spawns the device actor owning the
 /// driver. Errors: ec::unknown_link_kind, or the kind's own open error.
+/// Its channels show their packets to `tap` first (channels/packet_tap.hpp).
 caf::expected<device_actor> spawn_device(caf::actor_system& sys,
-                                         const device_config& cfg);
+                                         const device_config& cfg,
+                                         packet_tap_ptr tap = nullptr);
 
 } // namespace herm

@@ -40,6 +40,7 @@ struct io_manager_state {
   static inline const char* name = "herm.io_manager";
 
   backoff_policy backoff;
+  packet_tap_ptr tap;
   std::map<std::string, device_slot> devices;
   std::map<channel_id, channel_slot> channels;
   std::vector<io_listener_actor> listeners;
@@ -67,7 +68,7 @@ caf::expected<device_actor> ensure_device(io_impl self,
   auto& slot = i->second;
   if (slot.handle)
     return slot.handle;
-  auto dev = spawn_device(self->system(), slot.config);
+  auto dev = spawn_device(self->system(), slot.config, self->state.tap);
   if (!dev)
     return std::move(dev.error());
   slot.handle = *dev;
@@ -162,8 +163,10 @@ void open_channel(io_impl self, channel_id id, std::optional<open_promise> rp) {
 }
 
 io_manager_actor::behavior_type io_manager_fun(io_impl self,
-                                               backoff_policy backoff) {
+                                               backoff_policy backoff,
+                                               packet_tap_ptr tap) {
   self->state.backoff = backoff;
+  self->state.tap = std::move(tap);
   // Devices (and with them their channels) end with the IO manager.
   self->attach_functor([running = self->state.running](const caf::error& reason) {
     for (auto& kv : *running)
@@ -222,7 +225,7 @@ io_manager_actor::behavior_type io_manager_fun(io_impl self,
       if (st.devices.count(cfg.name) > 0)
         return make_error(ec::already_exists,
                           "a device named '" + cfg.name + "' exists");
-      auto dev = spawn_device(self->system(), cfg);
+      auto dev = spawn_device(self->system(), cfg, st.tap);
       if (!dev && permanent(dev.error()))
         return std::move(dev.error());
       auto& slot = st.devices[cfg.name];
@@ -342,8 +345,8 @@ io_manager_actor::behavior_type io_manager_fun(io_impl self,
 } // namespace
 
 io_manager_actor spawn_io_manager(caf::actor_system& sys,
-                                  backoff_policy backoff) {
-  return sys.spawn(io_manager_fun, backoff);
+                                  backoff_policy backoff, packet_tap_ptr tap) {
+  return sys.spawn(io_manager_fun, backoff, std::move(tap));
 }
 
 } // namespace herm

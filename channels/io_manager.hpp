@@ -14,6 +14,7 @@
 #include "channels/channel_actor.hpp"
 #include "channels/device_actor.hpp"
 #include "channels/messages.hpp"
+#include "channels/packet_tap.hpp"
 
 namespace herm {
 
@@ -90,8 +91,10 @@ using io_manager_actor = caf::typed_actor<
   caf::reacts_to<atom::retry, channel_id>>;
 
 /// Spawns the IO manager. Device configs in `devices` are registered at
-/// start; ones that fail to open are retried with backoff.
+/// start; ones that fail to open are retried with backoff. Every channel
+/// it opens shows its packets to `tap` first (channels/packet_tap.hpp).
 io_manager_actor spawn_io_manager(caf::actor_system& sys,
-                                  backoff_policy backoff = {});
+                                  backoff_policy backoff = {},
+                                  packet_tap_ptr tap = nullptr);
 
 } // namespace herm

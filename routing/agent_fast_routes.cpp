@@ -13,12 +13,14 @@ void publish_fast_routes(agent_impl self) {
     return;
   bool allowed = st.alloc->assigned() && !st.auth && !st.cfg.tracer
                  && !st.cfg.observer && !st.leaving;
-  if (!allowed || st.fast_dests.empty()) {
+  if (!allowed || (st.fast_dests.empty() && st.receivers.empty())) {
     cell->publish(nullptr);
     return;
   }
   auto snap = std::make_shared<route_snapshot>();
   snap->self = st.table.self();
+  for (auto& [protocol, receiver] : st.receivers)
+    snap->receivers.emplace(protocol, receiver);
   for (auto dst : st.fast_dests) {
     auto& hops = snap->routes[dst];
     for (uint8_t k = 0; k < size_classes; ++k)

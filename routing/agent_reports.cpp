@@ -195,6 +195,8 @@ routing_stats stats_now(agent_impl self) {
   if (auto& cell = st.cfg.fast_routes) {
     result.fast_sent = cell->sent();
     result.originated += result.fast_sent;
+    result.fast_delivered = cell->delivered();
+    result.delivered += result.fast_delivered;
   }
   result.sources_evicted = st.table.sources_evicted();
   if (auto other = st.alloc->live_holder(self->clock().now())) {

@@ -4,18 +4,21 @@
 // the routing agent publishes the next hops of the destinations its module
 // sends to as an immutable snapshot, and the application support layer
 // puts a unicast data packet for one of them straight on the next hop's
-// channel, without a turn through the agent. Hellos, updates, claims,
-// broadcasts, authentication, tracing and forwarding stay with the agent;
-// so does every packet the snapshot has no route for.
+// channel, without a turn through the agent. On the way in, a unicast data
+// packet for the module goes from the channel that received it straight to
+// the receiver of its protocol (fast_receiver, below). Hellos, updates,
+// claims, broadcasts, authentication, tracing and forwarding stay with the
+// agent; so does every packet the snapshot does not cover.
 //
 // Who publishes what (agent_fast_routes.cpp, publish_fast_routes): only while
 // the module has an address, no network key, no tracer or observer, and
-// has not said goodbye; only for destinations this module originated a
-// unicast packet to (at most `route_cell::max_destinations()`, counted in
+// has not said goodbye; its receivers, and routes only for destinations
+// this module originated a unicast packet to (at most
+// `route_cell::max_destinations()`, counted in
 // routing_stats::fast_routes_refused beyond); republished whenever a
 // selected route to one of them changes (a channel that ends takes its
-// routes with it, so that is such a change) or the module's address
-// changes; withdrawn when the agent ends.
+// routes with it, so that is such a change), a receiver subscribes or the
+// module's address changes; withdrawn when the agent ends.
 //
 // Order: a packet sent through the snapshot may overtake one sent through
 // the agent just before the snapshot appeared or changed (as a route change
@@ -33,12 +36,40 @@
 #include <optional>
 #include <unordered_map>
 
+#include "caf/meta/type_name.hpp"
+#include "caf/replies_to.hpp"
+#include "caf/typed_actor.hpp"
+
 #include "channels/channel_actor.hpp"
 #include "channels/messages.hpp"
+#include "channels/packet_tap.hpp"
 #include "routing/metric.hpp"
 #include "routing/module_id.hpp"
 
 namespace herm {
+
+/// A data packet for this module, handed to the receiver of its protocol.
+struct packet_delivered {
+  module_id src = no_module;
+  uint8_t protocol = 0;
+  uint8_t priority = prio_normal;
+  /// Hops the packet took.
+  uint8_t hops = 0;
+  byte_buffer payload;
+  /// The packet arrived signed and its signature verified (a keyed module;
+  /// always false without a key, and for packets this module sent itself).
+  bool authenticated = false;
+};
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, packet_delivered& x) {
+  return f(caf::meta::type_name("packet_delivered"), x.src, x.protocol,
+           x.priority, x.hops, x.payload, x.authenticated);
+}
+
+/// Receives this module's data packets of one protocol (the application
+/// layer).
+using network_receiver_actor = caf::typed_actor<caf::reacts_to<packet_delivered>>;
 
 /// Where a packet for one destination and size class leaves.
 struct fast_hop {
@@ -53,6 +84,9 @@ struct route_snapshot {
   /// Per destination, per size class (absent: no route in that class).
   std::unordered_map<module_id, std::array<std::optional<fast_hop>, size_classes>>
     routes;
+  /// The module's receivers, per protocol: a unicast data packet for this
+  /// module goes from its channel straight to one (fast_receiver).
+  std::unordered_map<uint8_t, network_receiver_actor> receivers;
 
   /// The next hop for a packet of class `k` to `dst`, or null.
   const fast_hop* lookup(module_id dst, uint8_t k) const {
@@ -100,11 +134,42 @@ public:
     return sent_.load(std::memory_order_relaxed);
   }
 
+  /// Counts one packet delivered through the snapshot (the agent adds
+  /// these to routing_stats::delivered).
+  void count_delivered() noexcept {
+    delivered_.fetch_add(1, std::memory_order_relaxed);
+  }
+
+  uint64_t delivered() const noexcept {
+    return delivered_.load(std::memory_order_relaxed);
+  }
+
 private:
   const size_t max_destinations_;
   mutable std::mutex mtx_;
   std::shared_ptr<const route_snapshot> snapshot_;
   std::atomic<uint64_t> sent_{0};
+  std::atomic<uint64_t> delivered_{0};
+};
+
+/// The receive half: the IO manager's packet tap (channels/packet_tap.hpp)
+/// that hands a unicast data packet for this module, unsigned, of a
+/// protocol with a receiver, from the channel straight to that receiver,
+/// its routing header cut off in place (no copy). Everything else (a
+/// packet the snapshot does not cover, none published, or one that does
+/// not decode) is left to the channel's reader, the routing agent, which
+/// counts what is malformed. Order: as for sending (above).
+class fast_receiver : public packet_tap {
+public:
+  explicit fast_receiver(std::shared_ptr<route_cell> cell)
+    : cell_(std::move(cell)) {
+    // nop
+  }
+
+  bool take(channel_id ch, link_addr src, byte_buffer& packet) override;
+
+private:
+  std::shared_ptr<route_cell> cell_;
 };
 
 } // namespace herm

@@ -794,6 +794,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
     },
     [self](atom::subscribe, uint8_t protocol, network_receiver_actor& rcv) {
       self->state.receivers[protocol] = std::move(rcv);
+      publish_fast_routes(self);
     },
     [self](atom::subscribe, atom::routes, route_listener_actor& l) {
       subscribe_routes(self, l);

@@ -47,25 +47,6 @@ typename Inspector::result_type inspect(Inspector& f, send_packet& x) {
            x.payload, x.sign);
 }
 
-/// A data packet for this module, handed to the receiver of its protocol.
-struct packet_delivered {
-  module_id src = no_module;
-  uint8_t protocol = 0;
-  uint8_t priority = prio_normal;
-  /// Hops the packet took.
-  uint8_t hops = 0;
-  byte_buffer payload;
-  /// The packet arrived signed and its signature verified (a keyed module;
-  /// always false without a key, and for packets this module sent itself).
-  bool authenticated = false;
-};
-
-template <class Inspector>
-typename Inspector::result_type inspect(Inspector& f, packet_delivered& x) {
-  return f(caf::meta::type_name("packet_delivered"), x.src, x.protocol,
-           x.priority, x.hops, x.payload, x.authenticated);
-}
-
 /// The selected size-class-0 route to a destination changed: it appeared,
 /// went away (withdrawn), or changed its cost, hop count, next hop or
 /// forwarding path; sent to route listeners. Carries everything a log line
@@ -270,6 +251,9 @@ struct routing_stats {
   /// them through the agent).
   uint64_t fast_sent = 0;
   uint64_t fast_routes_refused = 0;
+  /// Data packets for this module's receivers that went from the channel
+  /// straight to them (fast_receiver; counted in `delivered` too).
+  uint64_t fast_delivered = 0;
 };
 
 template <class Inspector>
@@ -288,12 +272,8 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.rx_neighbours_over_limit, x.seqno_requests_over_limit,
            x.floods_evicted, x.flood_ids_evicted, x.sources_evicted,
            x.id_conflicts, x.id_conflict_instance, x.id_conflict_heard,
-           x.fast_sent, x.fast_routes_refused);
+           x.fast_sent, x.fast_routes_refused, x.fast_delivered);
 }
-
-/// Receives this module's data packets of one protocol (the application
-/// layer).
-using network_receiver_actor = caf::typed_actor<caf::reacts_to<packet_delivered>>;
 
 /// Learns each change of a destination's selected route (reachability).
 using route_listener_actor = caf::typed_actor<caf::reacts_to<reachability>>;

@@ -153,7 +153,12 @@ public:
   void start_module(size_t i) {
     auto& m = modules_[i];
     m.apos.clear();
-    m.io = fx_.track(spawn_io_manager(fx_.sys()));
+    // With a route cell, the channels deliver through it as start_module's
+    // do (routing/fast_routes.hpp).
+    packet_tap_ptr tap;
+    if (m.cfg.fast_routes)
+      tap = std::make_shared<fast_receiver>(m.cfg.fast_routes);
+    m.io = fx_.track(spawn_io_manager(fx_.sys(), {}, std::move(tap)));
     m.agent = fx_.track(spawn_routing_agent(fx_.sys(), m.io, m.cfg));
     m.received = std::make_shared<delivery_log>();
     auto log = m.received;

@@ -404,6 +404,41 @@ TEST(asl_wire_round_trip, payloads_take_the_rest_of_the_message_whatever_it_hold
   }
 }
 
+TEST(asl_wire_round_trip, decoding_a_whole_buffer_gives_it_to_the_payload_without_a_copy) {
+  for (auto& s : samples()) {
+    SCOPED_TRACE(s.name);
+    auto b = enc(s.msg);
+    auto copy = b;
+    const uint8_t* storage = copy.data();
+    auto d = decode_asl(std::move(copy));
+    ASSERT_TRUE(d) << render(d.error());
+    EXPECT_TRUE(*d == s.msg);
+    EXPECT_EQ(enc(*d), b);
+    const byte_buffer* payload = std::visit(
+      [](auto& x) -> const byte_buffer* {
+        using T = std::decay_t<decltype(x)>;
+        if constexpr (std::is_same_v<T, asl_request> || std::is_same_v<T, asl_response>
+                      || std::is_same_v<T, asl_publish>
+                      || std::is_same_v<T, asl_reliable_request>)
+          return &x.payload;
+        else
+          return nullptr;
+      },
+      *d);
+    if (payload == nullptr) {
+      EXPECT_EQ(copy, b); // kinds without a payload leave it
+    } else if (!payload->empty()) {
+      EXPECT_EQ(payload->data(), storage); // the message's own bytes
+    }
+  }
+  // On an error the buffer is left as it was.
+  auto b = enc(asl_message{asl_request{1, 2, counting(16)}});
+  b[0] = 2;
+  auto copy = b;
+  EXPECT_FALSE(decode_asl(std::move(copy)));
+  EXPECT_EQ(copy, b);
+}
+
 // -- malformed messages ----------------------------------------------------------
 
 TEST(asl_wire_malformed, every_truncation_before_a_payload_is_refused) {

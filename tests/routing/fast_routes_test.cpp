@@ -1,6 +1,7 @@
 // The data path of established routes (routing/fast_routes.hpp): what the
-// routing agent publishes, when, and that a packet put on a published next
-// hop takes the selected route. Deterministic (test coordinator).
+// routing agent publishes, when, that a packet put on a published next hop
+// takes the selected route, and which received packets skip the agent.
+// Deterministic (test coordinator).
 
 #include <gtest/gtest.h>
 
@@ -79,10 +80,60 @@ private:
 
 } // namespace
 
-TEST_F(fast_routes_test, nothing_is_published_before_the_module_sends) {
+TEST_F(fast_routes_test, no_route_is_published_before_the_module_sends) {
   auto cell = std::make_shared<route_cell>();
   auto net = ring6(cell);
-  EXPECT_EQ(cell->get(), nullptr);
+  // Only its receiver (the network's protocol-0 log), for packets coming in.
+  auto snap = cell->get();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_TRUE(snap->routes.empty());
+  EXPECT_EQ(snap->receivers.size(), 1u);
+  EXPECT_EQ(snap->receivers.count(0), 1u);
+}
+
+TEST_F(fast_routes_test, a_packet_for_the_module_goes_from_its_channel_to_the_receiver) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  auto before = net.stats(0);
+  // 2 -> 0 goes 2-1-0; module 0's channel hands it to the receiver.
+  auto tag = net.send(2, id_of(0), 40);
+  // (Module 0 has no observer: the path shows the others.)
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(2), id_of(1)}));
+  ASSERT_EQ(net.at(0).received->size(), 1u);
+  auto& got = net.at(0).received->back();
+  EXPECT_EQ(got.src, id_of(2));
+  EXPECT_EQ(got.protocol, 0);
+  EXPECT_EQ(got.hops, 2);
+  EXPECT_FALSE(got.authenticated);
+  ASSERT_EQ(got.payload.size(), 40u); // the routing header cut off
+  uint64_t seen = 0;
+  for (int i = 0; i < 8; ++i)
+    seen |= uint64_t{got.payload[i]} << (8 * i);
+  EXPECT_EQ(seen, tag);
+  auto after = net.stats(0);
+  EXPECT_EQ(after.fast_delivered, before.fast_delivered + 1);
+  EXPECT_EQ(after.delivered, before.delivered + 1);
+}
+
+TEST_F(fast_routes_test, broadcasts_packets_for_others_and_unknown_protocols_stay_with_the_agent) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  auto before = net.stats(0);
+  // A flooded broadcast: duplicate suppression and relaying are the agent's.
+  net.send(3, broadcast_module);
+  EXPECT_EQ(net.at(0).received->size(), 1u);
+  // 1 -> 5 is forwarded by 0 (1-0-5).
+  auto tag = net.send(1, id_of(5));
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(1), id_of(5)}));
+  // A protocol nobody receives: the agent drops and counts it.
+  caf::anon_send(net.at(2).agent,
+                 send_packet{id_of(0), 7, prio_normal, byte_buffer(8, 1)});
+  net.run();
+  auto after = net.stats(0);
+  EXPECT_EQ(after.fast_delivered, before.fast_delivered);
+  EXPECT_EQ(after.forwarded, before.forwarded + 1);
+  EXPECT_EQ(after.dropped_no_receiver, before.dropped_no_receiver + 1);
+  EXPECT_EQ(net.at(0).received->size(), 1u);
 }
 
 TEST_F(fast_routes_test, a_destination_sent_to_is_published_with_its_selected_next_hop) {
