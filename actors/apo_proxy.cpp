@@ -17,10 +17,15 @@ namespace herm::detail {
 
 namespace {
 
-/// Enqueues `msg` at `dst` as an anonymous asynchronous message.
-void post(const caf::strong_actor_ptr& dst, caf::message msg,
-          caf::execution_unit* ctx) {
-  dst->enqueue(nullptr, caf::make_message_id(), std::move(msg), ctx);
+/// Enqueues `xs` at `dst` as an anonymous asynchronous message: one
+/// mailbox element holding the values, one allocation (a message made
+/// first and then enqueued takes two).
+template <class... Ts>
+void post(const caf::strong_actor_ptr& dst, caf::execution_unit* ctx,
+          Ts&&... xs) {
+  dst->enqueue(caf::make_mailbox_element(nullptr, caf::make_message_id(), {},
+                                         std::forward<Ts>(xs)...),
+               ctx);
 }
 
 class apo_proxy final : public caf::actor_proxy {
@@ -54,10 +59,8 @@ public:
       return;
     }
     auto mid = what->mid.integer_value();
-    post(asl,
-         caf::make_message(atom::forward_v, binding_, std::move(what->sender),
-                           mid, what->move_content_to_message()),
-         ctx);
+    post(asl, ctx, atom::forward_v, binding_, std::move(what->sender), mid,
+         what->move_content_to_message());
   }
 
   void kill_proxy(caf::execution_unit* ctx, caf::error reason) override {
@@ -68,7 +71,7 @@ public:
     // The last handle is gone: monitors learn it like from any actor that
     // became unreachable, and the layer forgets the binding.
     if (auto asl = asl_.lock())
-      post(asl, caf::make_message(atom::close_v, binding_), nullptr);
+      post(asl, nullptr, atom::close_v, binding_);
     cleanup(caf::exit_reason::unreachable, nullptr);
   }
 
@@ -94,11 +97,8 @@ public:
     if (!what->mid.is_response())
       return;
     if (auto asl = asl_.lock())
-      post(asl,
-           caf::make_message(atom::reply_v,
-                             what->mid.request_id().integer_value(),
-                             what->move_content_to_message()),
-           ctx);
+      post(asl, ctx, atom::reply_v, what->mid.request_id().integer_value(),
+           what->move_content_to_message());
   }
 
   void on_destroy() override {
