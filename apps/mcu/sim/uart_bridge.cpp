@@ -41,15 +41,22 @@ unsigned waiting(const uart_fifo_t& f) {
 
 } // namespace
 
-std::unique_ptr<uart_bridge> uart_bridge::open(avr_t* avr, char uart,
-                                               const std::string& link,
+std::unique_ptr<uart_bridge> uart_bridge::make(avr_t* avr, char uart,
                                                std::string& error) {
   auto* port = find_uart(avr, uart);
   if (port == nullptr) {
     error = std::string{"the core has no UART"} + uart;
     return nullptr;
   }
-  std::unique_ptr<uart_bridge> self{new uart_bridge(avr, port)};
+  return std::unique_ptr<uart_bridge>{new uart_bridge(avr, port)};
+}
+
+std::unique_ptr<uart_bridge> uart_bridge::open(avr_t* avr, char uart,
+                                               const std::string& link,
+                                               std::string& error) {
+  auto self = make(avr, uart, error);
+  if (self == nullptr)
+    return nullptr;
   self->master_ = ::posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
   if (self->master_ < 0) {
     error = errno_text("posix_openpt");
@@ -89,12 +96,9 @@ std::unique_ptr<uart_bridge> uart_bridge::open(avr_t* avr, char uart,
 std::unique_ptr<uart_bridge> uart_bridge::attach(avr_t* avr, char uart,
                                                  const std::string& device,
                                                  std::string& error) {
-  auto* port = find_uart(avr, uart);
-  if (port == nullptr) {
-    error = std::string{"the core has no UART"} + uart;
+  auto self = make(avr, uart, error);
+  if (self == nullptr)
     return nullptr;
-  }
-  std::unique_ptr<uart_bridge> self{new uart_bridge(avr, port)};
   self->master_ = ::open(device.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
   if (self->master_ < 0) {
     error = errno_text(("cannot open --device " + device).c_str());

@@ -87,6 +87,11 @@ public:
 
 private:
   uart_bridge(avr_t* avr, avr_uart_t* uart);
+
+  /// The bridge of `avr`'s UART `uart`, not yet connected; null (and
+  /// `error` set) when the core has no such UART.
+  static std::unique_ptr<uart_bridge> make(avr_t* avr, char uart,
+                                           std::string& error);
   void connect_irqs(char uart);
 
   static void on_output(avr_irq_t* irq, uint32_t value, void* param);
