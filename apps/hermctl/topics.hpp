@@ -14,8 +14,6 @@
 
 namespace hermctl {
 
-/// Ends a topic command: `message` to stderr, `status` the exit status
-/// (hermctl's: 1 failed, 2 usage, 3 no module).
 class bag;
 
 /// Adds one line of a raw topic stream (`subscribe` with `raw`,
@@ -26,6 +24,8 @@ class bag;
 /// as hex). The stream's end with an error throws topic_failure.
 bool record_line(bag& b, const std::string& line);
 
+/// Ends a topic command: `message` to stderr, `status` the exit status
+/// (hermctl's: 1 failed, 2 usage, 3 no module).
 struct topic_failure {
   int status;
   std::string message;

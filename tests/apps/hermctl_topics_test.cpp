@@ -128,9 +128,8 @@ protected:
       std::vector<std::string>{"/bin/sh", "-c", "exec " + cmd + " 2>/dev/null"});
   }
 
-  /// Waits until module `m` subscribes to `topic` (its list says so).
-  /// True once `topic` has subscribers on at least `modules` modules, as
-  /// module `m` sees it.
+  /// Waits until `topic` has subscribers on at least `modules` modules, as
+  /// module `m`'s topic list says; false after 10 s.
   static bool subscribed(const std::string& m, const std::string& topic,
                          size_t modules = 1) {
     auto deadline = std::chrono::steady_clock::now() + 10s;

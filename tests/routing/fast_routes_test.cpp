@@ -115,6 +115,31 @@ TEST_F(fast_routes_test, a_packet_for_the_module_goes_from_its_channel_to_the_re
   EXPECT_EQ(after.delivered, before.delivered + 1);
 }
 
+TEST_F(fast_routes_test, a_channel_with_a_second_reader_gives_every_packet_to_its_readers) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  // A capture: a second reader on each of module 0's channels.
+  auto seen = std::make_shared<size_t>(0);
+  auto capture = sys().spawn(
+    [seen](channel_reader_actor::pointer) -> channel_reader_actor::behavior_type {
+      return {[seen](packet_received&) { ++*seen; }, [](link_event&) {}};
+    });
+  size_t subscribed = 0;
+  for (channel_id id = 1; id <= 2; ++id)
+    if (auto ch = call<channel_actor>(net.at(0).io, atom::get_v, id))
+      if (call<channel_info>(std::get<0>(*ch), atom::subscribe_v, capture))
+        ++subscribed;
+  ASSERT_EQ(subscribed, 2u);
+  auto before = net.stats(0);
+  net.send(2, id_of(0));
+  EXPECT_EQ(net.at(0).received->size(), 1u);
+  EXPECT_GE(*seen, 1u);
+  auto after = net.stats(0);
+  EXPECT_EQ(after.fast_delivered, before.fast_delivered);
+  EXPECT_EQ(after.delivered, before.delivered + 1);
+  caf::anon_send_exit(capture, caf::exit_reason::user_shutdown);
+}
+
 TEST_F(fast_routes_test, broadcasts_packets_for_others_and_unknown_protocols_stay_with_the_agent) {
   auto cell = std::make_shared<route_cell>();
   auto net = ring6(cell);
