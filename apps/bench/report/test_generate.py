@@ -93,10 +93,34 @@ def main():
               "reference process shown without a verdict")
 
         # Skipped modes and missing benchmarks: a line each, no failure.
-        for mode in ("gap-10ms", "inprocess", "router"):
-            check(lines_with(text, f"(`{mode}`): not in this run."),
-                  f"round-trip mode {mode} listed as not run")
+        check(lines_with(text, "(`inprocess`): not in this run."),
+              "round-trip mode inprocess listed as not run")
         check("0.16× UDP, 0.41× DDS" in text, "oneway mode with both ratios")
+
+        # Issue 16's targets, each against its peer in the same run: 3x UDP
+        # with the gap (2x back to back), 1.6x the direct path through a
+        # router, one-way at least 3x DDS and 60 % of ZeroMQ, an idle hermd
+        # at most 20 wake-ups/s.
+        check(lines_with(text, "HERM round trip p50, gap-10ms, one-cpu",
+                         "2.50×", "≤ 3×", "**met**"),
+              "round trip with the gap: within 3x UDP, met")
+        check(lines_with(text, "HERM round trip below Cyclone DDS, gap-10ms, "
+                         "one-cpu", "0.625×", "**met**"),
+              "round trip with the gap below DDS: met")
+        check(lines_with(text, "HERM round trip through a router module, 16 B, "
+                         "one-cpu", "1.50×", "≤ 1.6×", "**met**"),
+              "router against the direct path: met")
+        check(lines_with(text, "HERM one-way throughput against Cyclone DDS, "
+                         "256 B", "0.41×", "≥ 3×", "**missed**"),
+              "one-way against DDS: missed below 3x")
+        check(lines_with(text, "HERM one-way throughput against ZeroMQ, 256 B",
+                         "0.68×", "≥ 0.6×", "**met**"),
+              "one-way against ZeroMQ: met at 60 %")
+        check(lines_with(text, "no neighbour: thread wake-ups", "12.0/s",
+                         "≤ 20.0/s", "**met**"),
+              "idle wake-ups met")
+        check(lines_with(text, "a neighbour on each: thread wake-ups", "80.0/s",
+                         "**missed**"), "idle wake-ups missed")
         check(lines_with(text, "| ZeroMQ | one-cpu | failed: server did not start |"),
               "an incomplete transport shows its error")
 
