@@ -68,7 +68,23 @@ bool needs_fast_tick(const asl_state& st) {
 void schedule_tick(asl_impl self, std::chrono::milliseconds period) {
   auto& st = self->state;
   st.tick_fast = period <= st.cfg.tick;
+  st.tick_at = self->clock().now() + period;
   self->delayed_send(self, period, atom::tick_v, ++st.tick_generation);
+}
+
+/// Whether the slow tick comes too late for what sending `msg` starts.
+/// A plain request needs the fine tick only from one tick before its
+/// deadline; the slow tick usually comes sooner and brings the fine one
+/// itself if the request still waits. Bringing it forward for every
+/// request would leave a superseded slow tick behind each time, which
+/// wakes the loop for nothing. Anything else (a reliable request's next
+/// copy after its RTO, an ack, a response) brings it forward.
+bool slow_tick_too_late(asl_impl self, const asl_message& msg) {
+  auto& st = self->state;
+  if (!std::holds_alternative<asl_request>(msg))
+    return true;
+  return st.tick_at + st.cfg.tick
+         > self->clock().now() + st.cfg.request_timeout;
 }
 
 /// Encodes `msg` once, into the scratch buffer, and sends it by the
@@ -76,7 +92,7 @@ void schedule_tick(asl_impl self, std::chrono::milliseconds period) {
 void send_now(asl_impl self, module_id dst, const asl_message& msg,
               bool sign) {
   auto& st = self->state;
-  if (!st.tick_fast && needs_fast_tick(st))
+  if (!st.tick_fast && needs_fast_tick(st) && slow_tick_too_late(self, msg))
     schedule_tick(self, st.cfg.tick);
   st.buf.clear();
   encode(msg, st.buf);
@@ -870,6 +886,10 @@ app_support_actor::behavior_type asl_fun(asl_impl self, routing_agent_actor agen
         send_due(self, st.bindings.bound_to(r.id, 0), true);
       } else {
         st.reach.down(r.id, self->clock().now());
+        // Requests waiting for it learn at the fine tick once its grace
+        // is over.
+        if (!st.tick_fast && needs_fast_tick(st))
+          schedule_tick(self, st.cfg.tick);
       }
     },
     [self](atom::forward, uint32_t id, caf::strong_actor_ptr& sender,

@@ -74,9 +74,11 @@ struct asl_state {
   caf::strong_actor_ptr sink;
   /// The housekeeping tick: only the tick of the latest generation counts
   /// (an earlier one, superseded when a request brought the tick forward,
-  /// is ignored), and whether it runs at cfg.tick (else cfg.idle_tick).
+  /// is ignored), whether it runs at cfg.tick (else cfg.idle_tick), and
+  /// when the latest one comes.
   uint64_t tick_generation = 0;
   bool tick_fast = true;
+  caf::actor_clock::time_point tick_at;
   /// When the module's own id was last asked of the routing agent.
   std::optional<caf::actor_clock::time_point> self_id_asked;
   byte_buffer buf;

@@ -41,12 +41,32 @@ public:
   explicit loop_clock(event_loop& loop) : loop_(loop) {
   }
 
-  /// Nanoseconds until the earliest timeout (0 when due), or INT64_MAX.
+  /// Nanoseconds until the loop must wake for a timeout (0 when one is
+  /// due), or INT64_MAX. A request timeout may wait up to
+  /// request_timeout_slack past its time for a wake the loop makes anyway
+  /// (fire_due fires everything due after every wait): CAF 0.17 never
+  /// cancels a request's timeout when the response comes, so every answered
+  /// request leaves one that fires for nothing, and without the slack each
+  /// would wake the loop on its own.
   int64_t wait_ns() {
     std::lock_guard<std::mutex> guard{mtx_};
     if (schedule_.empty())
       return std::numeric_limits<int64_t>::max();
-    auto d = schedule_.begin()->first - now();
+    auto wake = schedule_.begin()->first;
+    if (is_request_timeout(*schedule_.begin())) {
+      wake += request_timeout_slack;
+      // The first entry of another kind before that sets the wake; after
+      // max_looked request timeouts in a row, the last one does (earlier
+      // than needed, never later).
+      size_t looked = 0;
+      for (auto i = std::next(schedule_.begin());
+           i != schedule_.end() && i->first < wake; ++i)
+        if (!is_request_timeout(*i) || ++looked == max_looked) {
+          wake = i->first;
+          break;
+        }
+    }
+    auto d = wake - now();
     auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(d).count();
     return ns < 0 ? 0 : ns;
   }
@@ -106,6 +126,13 @@ public:
   }
 
 private:
+  static constexpr auto request_timeout_slack = std::chrono::milliseconds(20);
+  static constexpr size_t max_looked = 64;
+
+  static bool is_request_timeout(const schedule_map::value_type& x) {
+    return x.second->subtype == request_timeout_type;
+  }
+
   /// Runs `f` under the mutex. A new timeout set by another thread may be
   /// earlier than the loop's wait: wake it (free when it is awake).
   template <class F>

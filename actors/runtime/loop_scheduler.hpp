@@ -6,6 +6,9 @@
 // actor clock (timeouts, delayed messages) is a timer map on that thread, so
 // setting or cancelling a request timeout wakes no thread; another thread
 // that enqueues work writes the loop's eventfd only while the loop sleeps.
+// A request timeout fires up to 20 ms late, on a wake the loop makes for
+// something else if one comes: CAF 0.17 leaves the timeout of an answered
+// request in the clock, and each would otherwise wake the loop for nothing.
 //
 // A packet is therefore read, handed to its channel, routed and delivered to
 // its APO on the thread the kernel woke (docs/architecture.md, "Threads").

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 
+#include "caf/detail/simple_actor_clock.hpp"
 #include "caf/event_based_actor.hpp"
 #include "caf/typed_event_based_actor.hpp"
 
@@ -99,6 +100,19 @@ public:
 
   app_support_actor asl(size_t i) {
     return apps_of(*net, i);
+  }
+
+  /// Housekeeping ticks (and other delayed messages) on their way to
+  /// module i's application support.
+  size_t ticks_pending(size_t i) {
+    using clock = caf::detail::simple_actor_clock;
+    auto dst = caf::actor_cast<caf::strong_actor_ptr>(asl(i));
+    size_t n = 0;
+    for (auto& entry : sched.clock().schedule())
+      if (entry.second->subtype == clock::actor_msg_type
+          && static_cast<clock::actor_msg&>(*entry.second).receiver == dst)
+        ++n;
+    return n;
   }
 
   caf::actor spawn_calculator(std::shared_ptr<seen> log) {
@@ -941,6 +955,32 @@ TEST_F(asl_reliable_test, a_request_sent_while_idle_brings_the_slow_tick_forward
   EXPECT_TRUE(is(answer->front().error(), ec::timeout))
     << render(answer->front().error());
   EXPECT_EQ(stats(0).request_timeouts, 1u);
+}
+
+TEST_F(asl_reliable_test, a_plain_request_sent_while_idle_leaves_the_slow_tick_alone) {
+  cfg.idle_tick = 2s;
+  cfg.request_timeout = 5s;
+  build_half_raw(0);
+  apo_ref target{id_of(1), 7, "calc", "t"};
+  auto res = call<caf::actor>(asl(0), atom::bind_v, target, false);
+  ASSERT_TRUE(res) << render(res.error());
+  auto proxy = std::get<0>(*res);
+  net->advance(5s + 300ms); // idle: the next tick is up to 2 s away
+  ASSERT_EQ(ticks_pending(0), 1u);
+  auto answer = start_request<int32_t>(proxy, int32_t{40}, int32_t{2});
+  ASSERT_EQ(raw.received<asl_request>().size(), 1u);
+  // The slow tick comes long before the deadline: bringing the fine one
+  // forward would only leave it behind, superseded, to wake the loop.
+  EXPECT_EQ(ticks_pending(0), 1u) << "a superseded slow tick was left behind";
+  // The slow tick finds the request waiting and brings the fine tick: the
+  // deadline passes on it, not on a later slow one.
+  net->advance(4900ms);
+  EXPECT_TRUE(answer->empty());
+  net->advance(250ms);
+  ASSERT_EQ(answer->size(), 1u);
+  ASSERT_FALSE(answer->front());
+  EXPECT_TRUE(is(answer->front().error(), ec::timeout))
+    << render(answer->front().error());
 }
 
 TEST_F(asl_reliable_test, a_destination_gone_past_the_deadline_gives_no_route_not_sooner) {

@@ -112,6 +112,44 @@ TEST_F(loop_system, requests_between_loop_actors_with_timeouts_wake_no_thread) {
   EXPECT_GE(after.resumes - before.resumes, 2000u);
 }
 
+TEST_F(loop_system, the_timeouts_of_answered_requests_fire_on_wakes_the_loop_makes_anyway) {
+  // A client ticks every 5 ms; on each of its first 20 ticks it makes a
+  // request with a 30 ms timeout, answered at once. CAF 0.17 leaves each
+  // timeout in the clock; all of them come due while the ticks go on (40
+  // in all). The loop sleeps once per tick: a due timeout of an answered
+  // request rides along instead of waking it (20 more sleeps without the
+  // request timeouts' slack).
+  constexpr int ticks = 40;
+  constexpr int requests = 20;
+  caf::actor_system sys{cfg};
+  auto threads = std::make_shared<std::set<std::thread::id>>();
+  auto mtx = std::make_shared<std::mutex>();
+  auto server = sys.spawn(adder, threads, mtx);
+  std::promise<void> done;
+  auto client = sys.spawn([&, server](caf::event_based_actor* self) {
+    auto left = std::make_shared<int>(ticks);
+    return caf::behavior{[=, &done](caf::tick_atom) {
+      if (--*left < 0) {
+        done.set_value();
+        self->quit();
+        return;
+      }
+      if (ticks - *left <= requests)
+        self->request(server, 30ms, *left).then([](int) {});
+      self->delayed_send(self, 5ms, caf::tick_atom::value);
+    }};
+  });
+  std::this_thread::sleep_for(50ms); // the spawns settle, the loop sleeps
+  auto before = loop_stats_of(sys);
+  caf::anon_send(client, caf::tick_atom::value);
+  auto fut = done.get_future();
+  ASSERT_EQ(fut.wait_for(30s), std::future_status::ready);
+  auto sleeps = loop_stats_of(sys).sleeps - before.sleeps;
+  EXPECT_GE(sleeps, static_cast<uint64_t>(ticks));
+  EXPECT_LE(sleeps, static_cast<uint64_t>(ticks + requests / 4))
+    << "timeouts of answered requests woke the loop on their own";
+}
+
 TEST_F(loop_system, a_request_without_reply_times_out_with_a_typed_error) {
   caf::actor_system sys{cfg};
   auto silent = sys.spawn([](caf::event_based_actor*) -> caf::behavior {
