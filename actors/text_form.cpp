@@ -10,6 +10,7 @@
 #include "actors/marshal.hpp"
 #include "actors/type_description.hpp"
 #include "channels/error.hpp"
+#include "channels/hex.hpp"
 
 namespace herm {
 
@@ -797,21 +798,12 @@ std::string to_hex_bytes(const uint8_t* data, size_t size) {
 }
 
 caf::expected<byte_buffer> from_hex_bytes(const std::string& hex) {
-  auto nibble = [](char c) -> int {
-    if (c >= '0' && c <= '9')
-      return c - '0';
-    if (c >= 'a' && c <= 'f')
-      return c - 'a' + 10;
-    if (c >= 'A' && c <= 'F')
-      return c - 'A' + 10;
-    return -1;
-  };
   if (hex.size() % 2 != 0)
     return make_error(ec::invalid_parameter, "odd number of hex digits");
   byte_buffer out;
   out.reserve(hex.size() / 2);
   for (size_t i = 0; i < hex.size(); i += 2) {
-    auto hi = nibble(hex[i]), lo = nibble(hex[i + 1]);
+    auto hi = hex_digit(hex[i]), lo = hex_digit(hex[i + 1]);
     if (hi < 0 || lo < 0)
       return make_error(ec::invalid_parameter,
                         "not a hex digit at offset " + std::to_string(i));

@@ -15,6 +15,7 @@
 #include <openssl/params.h>
 #include <openssl/rand.h>
 
+#include "channels/hex.hpp"
 #include "channels/le_codec.hpp"
 #include "routing/error.hpp"
 
@@ -26,16 +27,6 @@ namespace {
 
 /// Larger key files are refused before reading (hex of 64 bytes is 128).
 constexpr off_t max_key_file = 1024;
-
-int hex_value(char c) {
-  if (c >= '0' && c <= '9')
-    return c - '0';
-  if (c >= 'a' && c <= 'f')
-    return c - 'a' + 10;
-  if (c >= 'A' && c <= 'F')
-    return c - 'A' + 10;
-  return -1;
-}
 
 std::string octal(unsigned mode) {
   char buf[16];
@@ -105,7 +96,7 @@ std::string read_key(const std::string& path, std::vector<uint8_t>& key) {
   if (!text.empty() && text.back() == '\r')
     text.pop_back();
   for (auto c : text)
-    if (hex_value(c) < 0)
+    if (hex_digit(c) < 0)
       return fail("must hold hex digits only (e.g. made with "
                   "'openssl rand -hex 32')");
   if (text.size() % 2 != 0)
@@ -117,8 +108,8 @@ std::string read_key(const std::string& path, std::vector<uint8_t>& key) {
                 + std::to_string(max_key_bytes));
   key.resize(bytes);
   for (size_t i = 0; i < bytes; ++i)
-    key[i] = static_cast<uint8_t>(hex_value(text[2 * i]) << 4
-                                  | hex_value(text[2 * i + 1]));
+    key[i] = static_cast<uint8_t>(hex_digit(text[2 * i]) << 4
+                                  | hex_digit(text[2 * i + 1]));
   OPENSSL_cleanse(&text[0], text.size());
   return {};
 }
