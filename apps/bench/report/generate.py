@@ -464,7 +464,10 @@ class Report:
                     v = c.get(key)
                     if v is None:
                         continue
-                    self.target(f"HERM {what}, {where}", num(v), "—", "—",
+                    shown = num(v)
+                    if v > limit and shown == num(limit):
+                        shown = f"{v:.3f}"  # 2.003 is over 2; "2.00" would hide it
+                    self.target(f"HERM {what}, {where}", shown, "—", "—",
                                 goal, v <= limit)
 
     def rtt_targets(self, mode, mc, placement=None):

@@ -110,6 +110,9 @@ def main():
         check(lines_with(text, "HERM round trip through a router module, 16 B, "
                          "one-cpu", "1.50×", "≤ 1.6×", "**met**"),
               "router against the direct path: met")
+        check(lines_with(text, "HERM thread wake-ups per module per round trip, "
+                         "router, 16 B, one-cpu", "| 2.004 |", "**missed**"),
+              "a count just over its limit shows the digits that put it over")
         check(lines_with(text, "HERM one-way throughput against Cyclone DDS, "
                          "256 B", "0.41×", "≥ 3×", "**missed**"),
               "one-way against DDS: missed below 3x")
