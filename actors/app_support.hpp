@@ -366,9 +366,11 @@ struct app_support_config {
   /// The housekeeping period while nothing needs `tick`'s granularity: no
   /// request waiting for its answer or its retransmission, none being
   /// served, no proxy looking for its target. Leases, watches and lost
-  /// modules are handled on it (all far coarser). A request sent while
-  /// idle brings the next tick forward to `tick` at once. Never below
-  /// `tick`.
+  /// modules are handled on it (all far coarser). A reliable request, an
+  /// ack or a response sent while idle brings the next tick forward to
+  /// `tick` at once; a plain request does so only when the slow tick would
+  /// come less than one `tick` before its deadline (otherwise the slow
+  /// tick brings the fine one itself). Never below `tick`.
   std::chrono::milliseconds idle_tick{500};
   /// A request still unanswered after this fails with ec::timeout (the
   /// requester's own `request(..., timeout)` may end it sooner).

@@ -71,6 +71,14 @@ public:
     return ns < 0 ? 0 : ns;
   }
 
+  /// Whether another thread changed the timeouts since the last call. The
+  /// loop asks after announcing that it sleeps: a timeout set between its
+  /// wait_ns() and that announcement found it awake (wake() did nothing),
+  /// and the loop must recompute its wait instead of sleeping the old one.
+  bool take_changed() {
+    return changed_.exchange(false);
+  }
+
   size_t fire_due() {
     std::lock_guard<std::mutex> guard{mtx_};
     return trigger_expired_timeouts();
@@ -141,12 +149,15 @@ private:
       std::lock_guard<std::mutex> guard{mtx_};
       f();
     }
-    if (adds && !loop_.in_loop_thread())
+    if (adds && !loop_.in_loop_thread()) {
+      changed_.store(true); // before wake(): pairs with sleeping_ (Dekker)
       loop_.wake();
+    }
   }
 
   std::mutex mtx_;
   event_loop& loop_;
+  std::atomic<bool> changed_{false};
 };
 
 class loop_coordinator final : public caf::scheduler::abstract_coordinator,
@@ -252,7 +263,9 @@ private:
   void run() {
     pthread_setname_np(pthread_self(), "herm-loop");
     super::system().thread_started();
-    loop_->set_has_work([this] { return foreign_count_.load() > 0; });
+    loop_->set_has_work([this] {
+      return foreign_count_.load() > 0 || clock_.take_changed();
+    });
     while (!loop_->stop_requested()) {
       drain_foreign();
       run_ready();

@@ -102,17 +102,28 @@ public:
     return apps_of(*net, i);
   }
 
-  /// Housekeeping ticks (and other delayed messages) on their way to
-  /// module i's application support.
-  size_t ticks_pending(size_t i) {
+  /// When the housekeeping ticks (and other delayed messages) on their way
+  /// to module i's application support are due.
+  std::vector<caf::actor_clock::time_point> ticks_pending_at(size_t i) {
     using clock = caf::detail::simple_actor_clock;
     auto dst = caf::actor_cast<caf::strong_actor_ptr>(asl(i));
-    size_t n = 0;
+    std::vector<caf::actor_clock::time_point> result;
     for (auto& entry : sched.clock().schedule())
       if (entry.second->subtype == clock::actor_msg_type
           && static_cast<clock::actor_msg&>(*entry.second).receiver == dst)
-        ++n;
-    return n;
+        result.push_back(entry.first);
+    return result;
+  }
+
+  size_t ticks_pending(size_t i) {
+    return ticks_pending_at(i).size();
+  }
+
+  /// Time until module i's next housekeeping tick.
+  caf::timespan next_tick_in(size_t i) {
+    auto at = ticks_pending_at(i);
+    EXPECT_FALSE(at.empty());
+    return at.empty() ? caf::timespan{0} : at.front() - sched.clock().now();
   }
 
   caf::actor spawn_calculator(std::shared_ptr<seen> log) {
@@ -981,6 +992,31 @@ TEST_F(asl_reliable_test, a_plain_request_sent_while_idle_leaves_the_slow_tick_a
   ASSERT_FALSE(answer->front());
   EXPECT_TRUE(is(answer->front().error(), ec::timeout))
     << render(answer->front().error());
+}
+
+TEST_F(asl_reliable_test, a_module_lost_while_idle_fails_a_plain_request_at_the_fine_tick) {
+  cfg.idle_tick = 5s;
+  cfg.request_timeout = 10s;
+  build(2, {{{0, 1}, "ethernet"}});
+  add(1, "calc", "t", spawn_calculator(std::make_shared<seen>()));
+  auto proxy = bind(0, bind_request{query_by::name, "calc", 300, false});
+  ASSERT_TRUE(proxy);
+  net->advance(6s);                    // idle: slow ticks
+  net->advance(std::chrono::ceil<std::chrono::milliseconds>(next_tick_in(0))
+               + 1ms); // just past one: the next is 5 s away
+  ASSERT_GE(next_tick_in(0), 4s);
+  net->silence(0);
+  // The request leaves the slow tick alone (its deadline is 10 s away) and
+  // is lost on the silent link. The route goes, the grace (300 ms) passes:
+  // the fine tick that losing the route brought forward fails the request,
+  // not the slow tick nor the deadline.
+  auto answer = start_request<int32_t>(*proxy, int32_t{1}, int32_t{2});
+  net->advance(2s);
+  ASSERT_EQ(answer->size(), 1u);
+  ASSERT_FALSE(answer->front());
+  EXPECT_TRUE(is(answer->front().error(), routing_ec::no_route))
+    << render(answer->front().error());
+  net->restore(0);
 }
 
 TEST_F(asl_reliable_test, a_destination_gone_past_the_deadline_gives_no_route_not_sooner) {

@@ -145,7 +145,9 @@ TEST_F(loop_system, the_timeouts_of_answered_requests_fire_on_wakes_the_loop_mak
   auto fut = done.get_future();
   ASSERT_EQ(fut.wait_for(30s), std::future_status::ready);
   auto sleeps = loop_stats_of(sys).sleeps - before.sleeps;
-  EXPECT_GE(sleeps, static_cast<uint64_t>(ticks));
+  // At least half the ticks slept (a tick due before the loop got to its
+  // wait, on a loaded machine, is handled without one).
+  EXPECT_GE(sleeps, static_cast<uint64_t>(ticks / 2));
   EXPECT_LE(sleeps, static_cast<uint64_t>(ticks + requests / 4))
     << "timeouts of answered requests woke the loop on their own";
 }
