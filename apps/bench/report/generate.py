@@ -565,7 +565,6 @@ class Report:
         # Issue 16: at 64 B at least 3x Cyclone DDS and 60 % of ZeroMQ, each
         # in the same run and placement.
         for c in herm:
-            # Issue 16 states them for 64-byte messages.
             if not (c.get("runs") and c.get("msgs_per_s")) or c["size"] != 64:
                 continue
             what = (f"{c['size']:,} B, policy {c.get('policy') or 'default'}"
