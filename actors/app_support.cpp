@@ -15,6 +15,7 @@
 #include "actors/asl_errors.hpp"
 #include "actors/asl_state.hpp"
 #include "actors/runtime/error.hpp"
+#include "actors/runtime/loop_scheduler.hpp"
 #include "actors/runtime/type_ids.hpp"
 #include "actors/unexpected.hpp"
 
@@ -137,8 +138,11 @@ caf::error agent_gone(asl_impl self) {
 
 void post(asl_impl self, const caf::strong_actor_ptr& dst,
           caf::strong_actor_ptr from, caf::message_id mid, caf::message msg) {
-  if (dst)
-    dst->enqueue(std::move(from), mid, std::move(msg), self->context());
+  if (!dst)
+    return;
+  if (mid.is_response())
+    request_answered(self->system(), dst->get(), mid);
+  dst->enqueue(std::move(from), mid, std::move(msg), self->context());
 }
 
 namespace {

@@ -17,7 +17,7 @@ outgoing_requests::outgoing_requests(uint64_t key, size_t max_pending,
 
 std::pair<uint64_t, outgoing&> outgoing_requests::add(outgoing out) {
   auto rid = ids_.next();
-  return {rid, requests_.emplace(rid, std::move(out)).first->second};
+  return {rid, spare_.emplace(requests_, rid, std::move(out))->second};
 }
 
 outgoing* outgoing_requests::expecting(uint64_t rid, module_id src, bool ack) {
@@ -58,7 +58,7 @@ outgoing_requests::on_response(module_id src, const asl_response& r,
     }
     reliable_.complete(r.request_id);
     if (out->oneway) {
-      requests_.erase(r.request_id);
+      spare_.erase(requests_, r.request_id);
       return step;
     }
   }
@@ -77,7 +77,7 @@ void outgoing_requests::on_ack(module_id src, const asl_ack& a,
   if (out->oneway) {
     reliable_.answered(out->tx, now);
     reliable_.complete(a.request_id);
-    requests_.erase(a.request_id);
+    spare_.erase(requests_, a.request_id);
     return;
   }
   // Being served: probe at the slowest pace until the response comes.
@@ -87,7 +87,7 @@ void outgoing_requests::on_ack(module_id src, const asl_ack& a,
 outgoing outgoing_requests::take(uint64_t rid) {
   auto i = requests_.find(rid);
   auto result = std::move(i->second);
-  requests_.erase(i);
+  spare_.erase(requests_, i);
   return result;
 }
 
@@ -97,7 +97,7 @@ std::vector<outgoing> outgoing_requests::take_if(Pred pred) {
   for (auto i = requests_.begin(); i != requests_.end();) {
     if (pred(i->second)) {
       result.push_back(std::move(i->second));
-      i = requests_.erase(i);
+      i = spare_.erase(requests_, i);
     } else {
       ++i;
     }

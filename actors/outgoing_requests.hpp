@@ -10,7 +10,9 @@
 // are held as plain values, never used. Holds references to the module's
 // reliable_requests and app_support_stats, which must outlive it. Not
 // thread-safe (one actor owns it). At most `max_pending` requests (add
-// refuses more); lookups O(log n), the take_* scans and due O(n).
+// refuses more); lookups O(log n), the take_* scans and due O(n). The
+// nodes of requests taken out are reused (spare_nodes.hpp): no allocation
+// per request for the table once warmed up.
 
 #include <chrono>
 #include <cstdint>
@@ -25,6 +27,7 @@
 #include "actors/app_table.hpp"
 #include "actors/binding_table.hpp"
 #include "actors/reliable_requests.hpp"
+#include "actors/spare_nodes.hpp"
 
 namespace herm {
 
@@ -106,7 +109,7 @@ public:
   void on_ack(module_id src, const asl_ack& a, time_point now);
 
   void erase(uint64_t rid) {
-    requests_.erase(rid);
+    spare_.erase(requests_, rid);
   }
 
   /// Removes `rid` and returns it (it must be there).
@@ -147,6 +150,7 @@ private:
   reliable_requests& reliable_;
   app_support_stats* stats_;
   std::map<uint64_t, outgoing> requests_;
+  spare_nodes<std::map<uint64_t, outgoing>> spare_;
 };
 
 } // namespace herm

@@ -87,8 +87,8 @@ request_server::accept(module_id src, uint64_t rid, uint32_t apo, bool oneway,
   if (reliable)
     reliable_.remember(src, rid, false, false, now).sign = sign;
   auto local = next_++;
-  serving_.emplace(local, served{src, rid, now + cfg_.request_timeout,
-                                 reliable, sign});
+  spare_.emplace(serving_, local,
+                 served{src, rid, now + cfg_.request_timeout, reliable, sign});
   ++stats_->requests_served;
   return local;
 }
@@ -100,7 +100,7 @@ void request_server::reply(uint64_t local,
   if (i == serving_.end())
     return; // timed out meanwhile
   auto s = i->second;
-  serving_.erase(i);
+  spare_.erase(serving_, i);
   asl_response r;
   r.request_id = s.origin_id;
   if (auto err = std::get_if<caf::error>(&answer)) {
@@ -116,7 +116,7 @@ void request_server::reply(uint64_t local,
 
 void request_server::expire(time_point now) {
   for (auto i = serving_.begin(); i != serving_.end();)
-    i = i->second.deadline <= now ? serving_.erase(i) : std::next(i);
+    i = i->second.deadline <= now ? spare_.erase(serving_, i) : std::next(i);
 }
 
 } // namespace herm

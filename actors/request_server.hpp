@@ -12,7 +12,8 @@
 // references to the module's apo_registry, reliable_requests and
 // app_support_stats, which must outlive it. Not thread-safe (one actor owns it). At most
 // `max_serving` requests served at once (more are refused, counted);
-// calls O(log n), expire O(n).
+// calls O(log n), expire O(n); the table's nodes are reused
+// (spare_nodes.hpp).
 
 #include <chrono>
 #include <cstdint>
@@ -25,6 +26,7 @@
 #include "actors/apo_registry.hpp"
 #include "actors/asl_outbox.hpp"
 #include "actors/reliable_requests.hpp"
+#include "actors/spare_nodes.hpp"
 
 namespace herm {
 
@@ -107,6 +109,7 @@ private:
   app_support_stats* stats_;
   uint64_t next_ = 1;
   std::map<uint64_t, served> serving_;
+  spare_nodes<std::map<uint64_t, served>> spare_;
 };
 
 } // namespace herm

@@ -27,8 +27,7 @@ size_t fragmenter::frames_for(size_t size) const noexcept {
 }
 
 void fragmenter::split(link_addr dst, uint8_t lane, const uint8_t* data,
-                       size_t size,
-                       const std::function<void(const uint8_t*, size_t)>& emit) {
+                       size_t size, frame_sink emit) {
   auto key = std::pair{dst, lane};
   if (tags_.size() >= max_sequences && tags_.count(key) == 0)
     tags_.clear();
@@ -38,13 +37,11 @@ void fragmenter::split(link_addr dst, uint8_t lane, const uint8_t* data,
   tag = next_tag_;
 }
 
-void fragmenter::split(link_addr dst, const uint8_t* data, size_t size,
-                       const std::function<void(const uint8_t*, size_t)>& emit) {
+void fragmenter::split(link_addr dst, const uint8_t* data, size_t size, frame_sink emit) {
   split(dst, 0, data, size, emit);
 }
 
-void fragmenter::split(const uint8_t* data, size_t size,
-                       const std::function<void(const uint8_t*, size_t)>& emit) {
+void fragmenter::split(const uint8_t* data, size_t size, frame_sink emit) {
   auto tag = next_tag_;
   if (size < mtu_) {
     if (scratch_.size() < size + 1)

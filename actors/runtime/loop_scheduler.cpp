@@ -17,6 +17,7 @@
 #include "caf/actor_system_config.hpp"
 #include "caf/detail/simple_actor_clock.hpp"
 #include "caf/execution_unit.hpp"
+#include "caf/mailbox_element.hpp"
 #include "caf/resumable.hpp"
 #include "caf/settings.hpp"
 #include "caf/scheduler/abstract_coordinator.hpp"
@@ -31,9 +32,123 @@ namespace {
 
 constexpr char busy_poll_key[] = "herm.busy-poll-us";
 
-/// CAF's simple clock behind a mutex. The loop thread asks it for the next
-/// due time before it sleeps and fires what is due after each wait; another
-/// thread that sets a timeout wakes the loop so it recomputes its wait.
+/// Timers in a binary heap over a vector, the earliest at the front: no
+/// allocation per timer once the vector has grown, unlike CAF's maps (two
+/// or three per timer). Timers due at the same time come out in the order
+/// they were set. Any entry can be removed in O(log n).
+class timer_heap {
+public:
+  using time_point = caf::actor_clock::time_point;
+
+  /// A delayed message (content set) or a request's timeout (content null:
+  /// `target` gets the error sec::request_timeout as the response `id`).
+  struct entry {
+    time_point due;
+    uint64_t seq = 0;
+    caf::strong_actor_ptr target;
+    caf::message_id id;
+    caf::mailbox_element_ptr content;
+  };
+
+  bool empty() const {
+    return xs_.empty();
+  }
+
+  size_t size() const {
+    return xs_.size();
+  }
+
+  const entry& front() const {
+    return xs_.front();
+  }
+
+  void push(entry x) {
+    x.seq = next_seq_++;
+    xs_.push_back(std::move(x));
+    sift_up(xs_.size() - 1);
+  }
+
+  /// Moves every entry due at `t` to `out`, earliest first.
+  void take_due(time_point t, std::vector<entry>& out) {
+    while (!xs_.empty() && xs_.front().due <= t) {
+      out.push_back(std::move(xs_.front()));
+      remove(0);
+    }
+  }
+
+  /// Removes the request timeout of `target` for `id` if it is among the
+  /// last `scan` entries (where one set recently usually is). True if so.
+  bool remove_request(const caf::actor_control_block* target,
+                      caf::message_id id, size_t scan) {
+    for (size_t k = 0; k < xs_.size() && k < scan; ++k) {
+      auto i = xs_.size() - 1 - k;
+      auto& x = xs_[i];
+      if (!x.content && x.id == id && x.target.get() == target) {
+        remove(i);
+        return true;
+      }
+    }
+    return false;
+  }
+
+  template <class Pred>
+  void remove_if(Pred pred) {
+    auto end = std::remove_if(xs_.begin(), xs_.end(), pred);
+    if (end == xs_.end())
+      return;
+    xs_.erase(end, xs_.end());
+    std::make_heap(xs_.begin(), xs_.end(), later);
+  }
+
+private:
+  static bool later(const entry& x, const entry& y) {
+    return x.due != y.due ? x.due > y.due : x.seq > y.seq;
+  }
+
+  void remove(size_t i) {
+    auto last = xs_.size() - 1;
+    if (i != last) {
+      xs_[i] = std::move(xs_[last]);
+      xs_.pop_back();
+      sift_up(sift_down(i));
+    } else {
+      xs_.pop_back();
+    }
+  }
+
+  size_t sift_down(size_t i) {
+    for (;;) {
+      auto first = i;
+      for (auto c : {2 * i + 1, 2 * i + 2})
+        if (c < xs_.size() && later(xs_[first], xs_[c]))
+          first = c;
+      if (first == i)
+        return i;
+      std::swap(xs_[i], xs_[first]);
+      i = first;
+    }
+  }
+
+  void sift_up(size_t i) {
+    while (i > 0) {
+      auto parent = (i - 1) / 2;
+      if (!later(xs_[parent], xs_[i]))
+        return;
+      std::swap(xs_[i], xs_[parent]);
+      i = parent;
+    }
+  }
+
+  std::vector<entry> xs_;
+  uint64_t next_seq_ = 0;
+};
+
+/// The actor clock of the loop, behind a mutex. The loop thread asks it for
+/// the next due time before it sleeps and fires what is due after each
+/// wait; another thread that sets a timeout wakes the loop so it recomputes
+/// its wait. Delayed messages and request timeouts, nearly all of the
+/// timers, are in heaps of its own (timer_heap); the rare rest (receive and
+/// stream timeouts, delayed group messages) in CAF's simple clock.
 class loop_clock final : public caf::detail::simple_actor_clock {
 public:
   using super = caf::detail::simple_actor_clock;
@@ -45,27 +160,21 @@ public:
   /// due), or INT64_MAX. A request timeout may wait up to
   /// request_timeout_slack past its time for a wake the loop makes anyway
   /// (fire_due fires everything due after every wait): CAF 0.17 never
-  /// cancels a request's timeout when the response comes, so every answered
-  /// request leaves one that fires for nothing, and without the slack each
-  /// would wake the loop on its own.
+  /// cancels a request's timeout when the response comes, so every request
+  /// answered by an actor other than application support (which cancels:
+  /// request_answered) leaves one that fires for nothing, and without the
+  /// slack each would wake the loop on its own.
   int64_t wait_ns() {
     std::lock_guard<std::mutex> guard{mtx_};
-    if (schedule_.empty())
+    auto wake = time_point::max();
+    if (!schedule_.empty())
+      wake = schedule_.begin()->first;
+    if (!messages_.empty())
+      wake = std::min(wake, messages_.front().due);
+    if (!requests_.empty())
+      wake = std::min(wake, requests_.front().due + request_timeout_slack);
+    if (wake == time_point::max())
       return std::numeric_limits<int64_t>::max();
-    auto wake = schedule_.begin()->first;
-    if (is_request_timeout(*schedule_.begin())) {
-      wake += request_timeout_slack;
-      // The first entry of another kind before that sets the wake; after
-      // max_looked request timeouts in a row, the last one does (earlier
-      // than needed, never later).
-      size_t looked = 0;
-      for (auto i = std::next(schedule_.begin());
-           i != schedule_.end() && i->first < wake; ++i)
-        if (!is_request_timeout(*i) || ++looked == max_looked) {
-          wake = i->first;
-          break;
-        }
-    }
     auto d = wake - now();
     auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(d).count();
     return ns < 0 ? 0 : ns;
@@ -79,9 +188,42 @@ public:
     return changed_.exchange(false);
   }
 
+  /// Fires what is due (loop thread only); returns how many.
   size_t fire_due() {
+    size_t fired = 0;
+    {
+      std::lock_guard<std::mutex> guard{mtx_};
+      fired = trigger_expired_timeouts();
+      auto t = now();
+      messages_.take_due(t, due_);
+      requests_.take_due(t, due_);
+    }
+    // Shipped outside the lock, as simple_actor_clock::ship would.
+    for (auto& x : due_) {
+      if (x.content)
+        x.target->enqueue(std::move(x.content), nullptr);
+      else
+        x.target->get()->eq_impl(x.id, x.target, nullptr,
+                                 caf::sec::request_timeout);
+    }
+    fired += due_.size();
+    due_.clear();
+    return fired;
+  }
+
+  /// Drops the timeout of `self`'s request whose response id is `id`, if
+  /// it is among the last max_scanned set (where a request still waiting
+  /// usually is); one further back fires for nothing, as CAF's would.
+  /// O(max_scanned + log n), no allocation.
+  void request_answered(caf::abstract_actor* self, caf::message_id id) {
     std::lock_guard<std::mutex> guard{mtx_};
-    return trigger_expired_timeouts();
+    requests_.remove_request(self->ctrl(), id, max_scanned);
+  }
+
+  /// Request timeouts waiting (tests).
+  size_t requests_waiting() {
+    std::lock_guard<std::mutex> guard{mtx_};
+    return requests_.size();
   }
 
   void set_ordinary_timeout(time_point t, caf::abstract_actor* self,
@@ -96,7 +238,9 @@ public:
 
   void set_request_timeout(time_point t, caf::abstract_actor* self,
                            caf::message_id id) override {
-    locked([&] { super::set_request_timeout(t, self, id); });
+    locked([&] {
+      requests_.push({t, 0, caf::strong_actor_ptr{self->ctrl()}, id, nullptr});
+    });
   }
 
   void cancel_ordinary_timeout(caf::abstract_actor* self,
@@ -106,17 +250,28 @@ public:
 
   void cancel_request_timeout(caf::abstract_actor* self,
                               caf::message_id id) override {
-    locked([&] { super::cancel_request_timeout(self, id); }, false);
+    locked([&] {
+      requests_.remove_if([&](const timer_heap::entry& x) {
+        return x.id == id && x.target.get() == self->ctrl();
+      });
+    }, false);
   }
 
+  /// Delayed messages stay: CAF's clock keeps them too.
   void cancel_timeouts(caf::abstract_actor* self) override {
-    locked([&] { super::cancel_timeouts(self); }, false);
+    locked([&] {
+      super::cancel_timeouts(self);
+      requests_.remove_if([&](const timer_heap::entry& x) {
+        return x.target.get() == self->ctrl();
+      });
+    }, false);
   }
 
   void schedule_message(time_point t, caf::strong_actor_ptr receiver,
                         caf::mailbox_element_ptr content) override {
     locked([&] {
-      super::schedule_message(t, std::move(receiver), std::move(content));
+      messages_.push({t, 0, std::move(receiver), caf::message_id{},
+                      std::move(content)});
     });
   }
 
@@ -130,16 +285,20 @@ public:
   }
 
   void cancel_all() override {
-    locked([&] { super::cancel_all(); }, false);
+    // Destroyed after the lock is released: the last handle to an actor may
+    // go with them, and its cleanup cancels its timeouts here.
+    timer_heap messages;
+    timer_heap requests;
+    locked([&] {
+      super::cancel_all();
+      std::swap(messages, messages_);
+      std::swap(requests, requests_);
+    }, false);
   }
 
 private:
   static constexpr auto request_timeout_slack = std::chrono::milliseconds(20);
-  static constexpr size_t max_looked = 64;
-
-  static bool is_request_timeout(const schedule_map::value_type& x) {
-    return x.second->subtype == request_timeout_type;
-  }
+  static constexpr size_t max_scanned = 64;
 
   /// Runs `f` under the mutex. A new timeout set by another thread may be
   /// earlier than the loop's wait: wake it (free when it is awake).
@@ -158,6 +317,10 @@ private:
   std::mutex mtx_;
   event_loop& loop_;
   std::atomic<bool> changed_{false};
+  timer_heap messages_;
+  timer_heap requests_;
+  /// What fire_due ships (loop thread only), kept for its capacity.
+  std::vector<timer_heap::entry> due_;
 };
 
 class loop_coordinator final : public caf::scheduler::abstract_coordinator,
@@ -242,6 +405,10 @@ public:
 
   void exec_later(caf::resumable* job) override {
     ready_.push_back(job); // only ever called by a job this thread runs
+  }
+
+  loop_clock& herm_clock() noexcept {
+    return clock_;
   }
 
   loop_stats stats() const {
@@ -358,9 +525,18 @@ void load_loop_scheduler(caf::actor_system_config& cfg, size_t busy_poll_us) {
 }
 
 loop_stats loop_stats_of(caf::actor_system& sys) {
-  if (auto* lc = dynamic_cast<loop_coordinator*>(&sys.scheduler()))
-    return lc->stats();
+  if (auto* lc = dynamic_cast<loop_coordinator*>(&sys.scheduler())) {
+    auto s = lc->stats();
+    s.request_timeouts = lc->herm_clock().requests_waiting();
+    return s;
+  }
   return {};
+}
+
+void request_answered(caf::actor_system& sys, caf::abstract_actor* requester,
+                      caf::message_id response_id) {
+  if (auto* lc = dynamic_cast<loop_coordinator*>(&sys.scheduler()))
+    lc->herm_clock().request_answered(requester, response_id);
 }
 
 } // namespace herm

@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <functional>
 #include <future>
+#include <memory>
 #include <optional>
 #include <thread>
 
@@ -148,4 +150,47 @@ TEST_F(blocking_apo, a_blocked_detached_apo_stalls_neither_routing_nor_other_apo
   EXPECT_EQ(fut.get(), "slow call");
   caller.join();
   EXPECT_GT(loop_stats_of(*sys).resumes, 0u); // it ran on the loop scheduler
+}
+
+TEST_F(blocking_apo, requests_answered_through_a_proxy_leave_no_timeout_behind) {
+  // Application support drops the timeout of each request it answers
+  // (loop_scheduler.hpp, request_answered): 50 requests with an hour's
+  // timeout leave none in the clock, where CAF 0.17 would keep all 50 for
+  // an hour and then fire them for nothing.
+  add(mods[1], "echo", sys->spawn(echo));
+  auto proxy = bind(mods[0], "echo");
+  ASSERT_TRUE(proxy);
+  constexpr int n = 50;
+  std::promise<int> done;
+  auto before = loop_stats_of(*sys).request_timeouts;
+  auto client = sys->spawn([&, proxy](caf::event_based_actor* self) {
+    auto left = std::make_shared<int>(n);
+    auto next = std::make_shared<std::function<void()>>();
+    *next = [=, &done] {
+      self->request(proxy, 3600s, std::string{"ping"})
+        .then(
+          [=, &done](const std::string&) {
+            if (--*left == 0) {
+              done.set_value(n);
+              *next = nullptr; // ends the cycle through the capture
+              return;
+            }
+            (*next)();
+          },
+          [=, &done](caf::error& err) {
+            ADD_FAILURE() << render(err);
+            done.set_value(n - *left);
+            *next = nullptr;
+          });
+    };
+    (*next)();
+    // Stays (an actor that ends takes its timeouts along).
+    return caf::behavior{[](int) {}};
+  });
+  auto fut = done.get_future();
+  ASSERT_EQ(fut.wait_for(60s), std::future_status::ready);
+  ASSERT_EQ(fut.get(), n);
+  // Only timeouts set before (by the scoped actors above) can remain.
+  EXPECT_LE(loop_stats_of(*sys).request_timeouts, before);
+  caf::anon_send_exit(client, caf::exit_reason::user_shutdown);
 }

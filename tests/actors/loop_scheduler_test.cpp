@@ -14,11 +14,14 @@
 #include <mutex>
 #include <set>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 
 #include "caf/actor_system.hpp"
 #include "caf/actor_system_config.hpp"
+#include "caf/actor_cast.hpp"
+#include "caf/mailbox_element.hpp"
 #include "caf/event_based_actor.hpp"
 #include "caf/scoped_actor.hpp"
 #include "caf/send.hpp"
@@ -150,6 +153,83 @@ TEST_F(loop_system, the_timeouts_of_answered_requests_fire_on_wakes_the_loop_mak
   EXPECT_GE(sleeps, static_cast<uint64_t>(ticks / 2));
   EXPECT_LE(sleeps, static_cast<uint64_t>(ticks + requests / 4))
     << "timeouts of answered requests woke the loop on their own";
+}
+
+TEST_F(loop_system, request_answered_drops_the_timeout_of_the_request_it_names) {
+  // Application support calls request_answered for each response it
+  // delivers; the timeout goes, where CAF 0.17 would let it fire for
+  // nothing. A request nobody declares answered keeps its timeout.
+  caf::actor_system sys{cfg};
+  auto threads = std::make_shared<std::set<std::thread::id>>();
+  auto mtx = std::make_shared<std::mutex>();
+  auto server = sys.spawn(adder, threads, mtx);
+  std::promise<void> done;
+  auto before = loop_stats_of(sys).request_timeouts;
+  auto client = sys.spawn([&, server](caf::event_based_actor* self) {
+    auto declared = self->request(server, 600s, 1);
+    auto rid = declared.id(); // the response's id already
+    std::move(declared).then([=, &done](int) {
+      request_answered(self->system(), self, rid);
+      self->request(server, 600s, 2).then([&done](int) { done.set_value(); });
+    });
+    // Stays (an actor that ends takes its timeouts along).
+    return caf::behavior{[](int) {}};
+  });
+  auto fut = done.get_future();
+  ASSERT_EQ(fut.wait_for(30s), std::future_status::ready);
+  EXPECT_EQ(loop_stats_of(sys).request_timeouts, before + 1);
+  caf::anon_send_exit(client, caf::exit_reason::user_shutdown);
+}
+
+TEST_F(loop_system, an_actor_that_ends_takes_its_request_timeouts_along) {
+  caf::actor_system sys{cfg};
+  auto silent = sys.spawn([](caf::event_based_actor*) -> caf::behavior {
+    return {[](int) -> caf::result<int> { return caf::delegated<int>{}; }};
+  });
+  auto client = sys.spawn([silent](caf::event_based_actor* self) {
+    self->request(silent, 600s, 1).then([](int) {});
+    return caf::behavior{[](int) {}};
+  });
+  // Bounded waits: CAF cancels an ending actor's timeouts after it told its
+  // monitors, so the count may lag a moment behind what is observed here.
+  auto settles_at = [&](uint64_t n) {
+    for (int i = 0; i < 3000; ++i) {
+      if (loop_stats_of(sys).request_timeouts == n)
+        return true;
+      std::this_thread::sleep_for(1ms);
+    }
+    return false;
+  };
+  EXPECT_TRUE(settles_at(1)) << "the request's timeout was never set";
+  caf::anon_send_exit(client, caf::exit_reason::user_shutdown);
+  EXPECT_TRUE(settles_at(0)) << "the ended actor's timeout stayed";
+}
+
+TEST_F(loop_system, delayed_messages_due_at_the_same_time_arrive_in_the_order_sent) {
+  caf::actor_system sys{cfg};
+  auto got = std::make_shared<std::vector<int>>();
+  std::promise<void> done;
+  constexpr int n = 200;
+  auto sink = sys.spawn([&, got](caf::event_based_actor*) -> caf::behavior {
+    return {[&, got](int x) {
+      got->push_back(x);
+      if (got->size() == n)
+        done.set_value();
+    }};
+  });
+  auto& clock = sys.clock();
+  auto at = clock.now() + 20ms;
+  for (int i = 0; i < n; ++i)
+    clock.schedule_message(at, caf::actor_cast<caf::strong_actor_ptr>(sink),
+                           caf::make_mailbox_element(nullptr,
+                                                     caf::make_message_id(),
+                                                     {}, i));
+  auto fut = done.get_future();
+  ASSERT_EQ(fut.wait_for(30s), std::future_status::ready);
+  std::vector<int> want(n);
+  for (int i = 0; i < n; ++i)
+    want[i] = i;
+  EXPECT_EQ(*got, want);
 }
 
 TEST_F(loop_system, a_request_without_reply_times_out_with_a_typed_error) {
