@@ -6,11 +6,10 @@
 #include "caf/actor_system.hpp"
 #include "caf/exit_reason.hpp"
 #include "caf/make_actor.hpp"
-#include "caf/mailbox_element.hpp"
-#include "caf/make_message.hpp"
 #include "caf/system_messages.hpp"
 
 #include "actors/runtime/atoms.hpp"
+#include "channels/thread_cache.hpp"
 #include "actors/runtime/error.hpp"
 
 namespace herm::detail {
@@ -18,13 +17,13 @@ namespace herm::detail {
 namespace {
 
 /// Enqueues `xs` at `dst` as an anonymous asynchronous message: one
-/// mailbox element holding the values, one allocation (a message made
-/// first and then enqueued takes two).
+/// mailbox element holding the values, its block from the thread's cache
+/// (a message made first and then enqueued would take two blocks).
 template <class... Ts>
 void post(const caf::strong_actor_ptr& dst, caf::execution_unit* ctx,
           Ts&&... xs) {
-  dst->enqueue(caf::make_mailbox_element(nullptr, caf::make_message_id(), {},
-                                         std::forward<Ts>(xs)...),
+  dst->enqueue(make_pooled_element(nullptr, caf::make_message_id(),
+                                   std::forward<Ts>(xs)...),
                ctx);
 }
 
@@ -59,8 +58,9 @@ public:
       return;
     }
     auto mid = what->mid.integer_value();
-    post(asl, ctx, atom::forward_v, binding_, std::move(what->sender), mid,
-         what->move_content_to_message());
+    auto sender = std::move(what->sender);
+    post(asl, ctx, atom::forward_v, binding_, std::move(sender), mid,
+         take_content(what));
   }
 
   void kill_proxy(caf::execution_unit* ctx, caf::error reason) override {

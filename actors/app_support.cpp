@@ -18,6 +18,7 @@
 #include "actors/runtime/loop_scheduler.hpp"
 #include "actors/runtime/type_ids.hpp"
 #include "actors/unexpected.hpp"
+#include "channels/thread_cache.hpp"
 
 namespace herm {
 
@@ -26,6 +27,13 @@ namespace asl_detail {
 namespace {
 
 // -- small helpers -----------------------------------------------------------------
+
+template <class T, class = void>
+constexpr bool has_payload = false;
+
+template <class T>
+constexpr bool has_payload<T, std::void_t<decltype(std::declval<T&>().payload)>>
+  = true;
 
 /// Puts the encoded message `body` for `dst` straight on the next hop's
 /// channel when the routing agent published one (routing/fast_routes.hpp):
@@ -48,13 +56,16 @@ bool send_fast(asl_impl self, module_id dst, const byte_buffer& body,
   auto* hop = snap->lookup(dst, h.size_class);
   if (hop == nullptr)
     return false;
-  byte_buffer bytes;
-  bytes.reserve(header_size(h) + body.size());
+  // Given back by the channel once written.
+  auto bytes = take_buffer(header_size(h) + body.size());
   encode(h, bytes);
   bytes.insert(bytes.end(), body.begin(), body.end());
   cell->count_sent();
-  self->send(hop->channel,
-             write_packet{hop->neighbour, h.priority, std::move(bytes)});
+  hop->channel->enqueue(make_pooled_element(self->ctrl(), caf::make_message_id(),
+                                            write_packet{hop->neighbour,
+                                                         h.priority,
+                                                         std::move(bytes)}),
+                        self->context());
   return true;
 }
 
@@ -105,13 +116,31 @@ void send_now(asl_impl self, module_id dst, const asl_message& msg,
 
 } // namespace
 
+namespace {
+
+/// Gives the payload buffer of `msg`, if its kind has one, back to the
+/// thread's cache (channels/thread_cache.hpp): `msg` was encoded or
+/// decoded, and the next payload marshalled or received can use it.
+void recycle_payload(asl_message& msg) {
+  std::visit(
+    [](auto& x) {
+      if constexpr (has_payload<std::decay_t<decltype(x)>>)
+        recycle_buffer(std::move(x.payload));
+    },
+    msg);
+}
+
+} // namespace
+
 void flush(asl_impl self) {
   auto& st = self->state;
   // Swapped with a vector kept for the purpose, so that neither allocates
   // once both have grown.
   st.flushing.swap(st.out.items);
-  for (auto& x : st.flushing)
+  for (auto& x : st.flushing) {
     send_now(self, x.dst, x.msg, x.sign);
+    recycle_payload(x.msg);
+  }
   st.flushing.clear();
 }
 
@@ -120,10 +149,11 @@ namespace {
 /// Sends an ASL message over the network (after what the outbox holds);
 /// with `sign`, signed in a keyed network whatever its `auth.data`
 /// (apo_access::signed_only traffic).
-void transmit(asl_impl self, module_id dst, const asl_message& msg,
+void transmit(asl_impl self, module_id dst, asl_message msg,
               bool sign = false) {
   flush(self);
   send_now(self, dst, msg, sign);
+  recycle_payload(msg);
 }
 
 /// app_ec::unavailable once the routing agent stopped, else none.
@@ -142,7 +172,8 @@ void post(asl_impl self, const caf::strong_actor_ptr& dst,
     return;
   if (mid.is_response())
     request_answered(self->system(), dst->get(), mid);
-  dst->enqueue(std::move(from), mid, std::move(msg), self->context());
+  dst->enqueue(make_pooled_message_element(std::move(from), mid, std::move(msg)),
+               self->context());
 }
 
 namespace {
@@ -568,6 +599,7 @@ void on_packet(asl_impl self, packet_delivered& pkt) {
       }
     },
     *msg);
+  recycle_payload(*msg);
   flush(self);
 }
 

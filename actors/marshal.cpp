@@ -1,6 +1,7 @@
 #include "actors/marshal.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cstring>
 #include <string>
 #include <type_traits>
@@ -11,7 +12,8 @@
 #include "caf/atom.hpp"
 #include "caf/deserializer.hpp"
 #include "caf/duration.hpp"
-#include "caf/detail/dynamic_message_data.hpp"
+#include "caf/detail/message_data.hpp"
+#include "caf/intrusive_ptr.hpp"
 #include "caf/sec.hpp"
 #include "caf/serializer.hpp"
 #include "caf/type_erased_value.hpp"
@@ -19,6 +21,7 @@
 
 #include "actors/runtime/error.hpp"
 #include "channels/le_codec.hpp"
+#include "channels/thread_cache.hpp"
 
 namespace herm {
 
@@ -384,6 +387,89 @@ private:
   std::string reason_;
 };
 
+/// The values of an unmarshalled message: up to four in place, the rest in
+/// a vector, the object itself from the thread's block cache
+/// (channels/thread_cache.hpp). CAF's dynamic_message_data takes two
+/// blocks (itself and its vector) for the same.
+class unmarshalled_data final : public caf::detail::message_data,
+                                public block_cached {
+public:
+  unmarshalled_data() = default;
+
+  unmarshalled_data(const unmarshalled_data& other)
+    : caf::detail::message_data(other) {
+    for (size_t i = 0; i < other.size_; ++i)
+      append(other.at(i).copy());
+  }
+
+  using block_cached::operator new;
+  using block_cached::operator delete;
+
+  void append(caf::type_erased_value_ptr x) {
+    type_token_ = (type_token_ << 6) | x->type().first;
+    if (size_ < in_place)
+      first_[size_] = std::move(x);
+    else
+      rest_.emplace_back(std::move(x));
+    ++size_;
+  }
+
+  unmarshalled_data* copy() const override {
+    return new unmarshalled_data(*this);
+  }
+
+  void* get_mutable(size_t pos) override {
+    return at(pos).get_mutable();
+  }
+
+  caf::error load(size_t pos, caf::deserializer& source) override {
+    return at(pos).load(source);
+  }
+
+  size_t size() const noexcept override {
+    return size_;
+  }
+
+  uint32_t type_token() const noexcept override {
+    return type_token_;
+  }
+
+  caf::rtti_pair type(size_t pos) const noexcept override {
+    return at(pos).type();
+  }
+
+  const void* get(size_t pos) const noexcept override {
+    return at(pos).get();
+  }
+
+  std::string stringify(size_t pos) const override {
+    return at(pos).stringify();
+  }
+
+  using caf::detail::message_data::copy;
+
+  caf::type_erased_value_ptr copy(size_t pos) const override {
+    return at(pos).copy();
+  }
+
+  caf::error save(size_t pos, caf::serializer& sink) const override {
+    return at(pos).save(sink);
+  }
+
+private:
+  static constexpr size_t in_place = 4;
+
+  caf::type_erased_value& at(size_t pos) const noexcept {
+    return pos < in_place ? *first_[pos] : *rest_[pos - in_place];
+  }
+
+  std::array<caf::type_erased_value_ptr, in_place> first_;
+  std::vector<caf::type_erased_value_ptr> rest_;
+  size_t size_ = 0;
+  // As CAF's dynamic_message_data computes it.
+  uint32_t type_token_ = 0xFFFFFFFF;
+};
+
 std::string element_prefix(size_t i, const std::string& name) {
   return "element " + std::to_string(i) + " (" + name + "): ";
 }
@@ -433,8 +519,9 @@ caf::error marshal_to(caf::actor_system& sys, const caf::message& msg,
 
 caf::expected<byte_buffer> marshal(caf::actor_system& sys,
                                    const caf::message& msg) {
-  byte_buffer out;
-  out.reserve(128);
+  // Its storage usually comes back to the cache once the message that
+  // carries it is sent (app_support.cpp, recycle_payload).
+  auto out = take_buffer(128);
   if (auto err = marshal_to(sys, msg, out))
     return err;
   return out;
@@ -472,8 +559,9 @@ caf::expected<caf::message> unmarshal(caf::actor_system& sys,
                         + std::to_string(source.remaining())
                         + " bytes follow");
   auto& types = sys.types();
-  caf::detail::dynamic_message_data::elements elements;
-  elements.reserve(static_cast<size_t>(count));
+  caf::intrusive_ptr<unmarshalled_data> values;
+  if (count > 0)
+    values.reset(new unmarshalled_data, false);
   // Reused per thread: no allocation per element for the type name.
   thread_local std::string name;
   for (size_t i = 0; i < count; ++i) {
@@ -503,7 +591,7 @@ caf::expected<caf::message> unmarshal(caf::actor_system& sys,
                             + std::to_string(static_cast<uint32_t>(unit))
                             + " is out of range");
     }
-    elements.emplace_back(std::move(value));
+    values->append(std::move(value));
   }
   if (source.remaining() != 0)
     return make_error(ec::invalid_parameter,
@@ -511,9 +599,8 @@ caf::expected<caf::message> unmarshal(caf::actor_system& sys,
                         + " trailing bytes after the last element (offset "
                         + std::to_string(source.offset()) + ")");
   caf::message result;
-  if (!elements.empty())
-    result = caf::message{caf::message::data_ptr{
-      new caf::detail::dynamic_message_data(std::move(elements)), false}};
+  if (values)
+    result = caf::message{caf::message::data_ptr{values.detach(), false}};
   // Only the canonical encoding of a message is valid: this refuses
   // booleans other than 0 and 1, unsorted or duplicate map keys and any
   // other input that would decode to the same value as different bytes.

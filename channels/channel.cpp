@@ -17,6 +17,7 @@
 #include "channels/bundling_port.hpp"
 #include "channels/port.hpp"
 #include "channels/tx_backlog.hpp"
+#include "channels/thread_cache.hpp"
 
 namespace herm {
 
@@ -307,6 +308,9 @@ channel_actor::behavior_type channel_fun(channel_impl self,
       // Counted, dropped or held for a bundle by the port stack.
       (void) st.port->send(dst, msg.priority, msg.bytes.data(),
                            msg.bytes.size());
+      // The sender took it from this thread's cache (application support's
+      // fast path, channels/thread_cache.hpp).
+      recycle_buffer(std::move(msg.bytes));
     },
     [self](atom::subscribe, channel_reader_actor& reader) -> channel_info {
       auto& readers = self->state.readers;
@@ -423,6 +427,7 @@ channel_actor::behavior_type channel_fun(channel_impl self,
         msg.bytes.clear();
         st.rx_buf.swap(msg.bytes);
       }
+      recycle_buffer(std::move(msg.bytes));
     },
     [self](link_event& ev) {
       publish(self, std::move(ev));

@@ -14,6 +14,7 @@
 #include "channels/type_ids.hpp"
 #include "channels/channel.hpp"
 #include "channels/link_driver.hpp"
+#include "channels/thread_cache.hpp"
 
 namespace herm {
 
@@ -43,8 +44,9 @@ public:
     // The channel releases the charge when it takes the frame.
     if (!to.queue->charge(size))
       return;
-    caf::anon_send(to.ch,
-                   frame_received{src, byte_buffer(data, data + size), lane});
+    auto bytes = take_buffer(size);
+    bytes.assign(data, data + size);
+    pooled_anon_send(to.ch, frame_received{src, std::move(bytes), lane});
   }
 
   void on_malformed(link_addr, const char*) override {

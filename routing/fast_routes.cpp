@@ -1,7 +1,6 @@
 #include "routing/fast_routes.hpp"
 
-#include "caf/send.hpp"
-
+#include "channels/thread_cache.hpp"
 #include "routing/type_ids.hpp"
 #include "routing/wire.hpp"
 
@@ -31,7 +30,7 @@ bool fast_receiver::take(channel_id, link_addr, byte_buffer& packet) {
   packet.erase(packet.begin(),
                packet.begin() + static_cast<ptrdiff_t>(header_size(*h)));
   msg.payload = std::move(packet);
-  caf::anon_send(i->second, std::move(msg));
+  pooled_anon_send(i->second, std::move(msg));
   cell_->count_delivered();
   return true;
 }

@@ -324,6 +324,30 @@ TEST_F(marshal_test, round_trips_nested_herm_structs) {
   EXPECT_EQ(info.max_packet, 4096u);
 }
 
+TEST_F(marshal_test, round_trips_messages_of_more_values_than_it_keeps_in_place) {
+  // Up to four values live in the message data itself, the rest in a
+  // vector (marshal.cpp, unmarshalled_data); both halves must round trip,
+  // match and copy on write.
+  auto back = round_trip(caf::make_message(uint8_t{1}, std::string{"two"},
+                                           3.0, int32_t{-4},
+                                           std::string{"five"}, true));
+  ASSERT_TRUE((back.match_elements<uint8_t, std::string, double, int32_t,
+                                   std::string, bool>()));
+  EXPECT_EQ(back.get_as<int32_t>(3), -4);
+  EXPECT_EQ(back.get_as<std::string>(4), "five");
+  auto copy = back;
+  copy.get_mutable_as<std::string>(4) = "six";
+  copy.get_mutable_as<std::string>(1) = "seven";
+  EXPECT_EQ(back.get_as<std::string>(4), "five");
+  EXPECT_EQ(back.get_as<std::string>(1), "two");
+  EXPECT_EQ(copy.get_as<std::string>(4), "six");
+  EXPECT_EQ(copy.get_as<std::string>(1), "seven");
+  EXPECT_EQ(copy.type_token(), back.type_token());
+  EXPECT_EQ(back.type_token(),
+            (caf::make_type_token<uint8_t, std::string, double, int32_t,
+                                  std::string, bool>()));
+}
+
 TEST_F(marshal_test, round_trips_a_user_type_with_only_inspect_and_a_type_id) {
   apo_test::sample x;
   x.flag = true;
