@@ -9,8 +9,8 @@
 #include "caf/system_messages.hpp"
 
 #include "actors/runtime/atoms.hpp"
-#include "channels/thread_cache.hpp"
 #include "actors/runtime/error.hpp"
+#include "channels/thread_cache.hpp"
 
 namespace herm::detail {
 
@@ -58,6 +58,7 @@ public:
       return;
     }
     auto mid = what->mid.integer_value();
+    // Taken before take_content hands the element over.
     auto sender = std::move(what->sender);
     post(asl, ctx, atom::forward_v, binding_, std::move(sender), mid,
          take_content(what));

@@ -37,8 +37,8 @@ constexpr bool has_payload<T, std::void_t<decltype(std::declval<T&>().payload)>>
 
 /// Puts the encoded message `body` for `dst` straight on the next hop's
 /// channel when the routing agent published one (routing/fast_routes.hpp):
-/// header and body in one buffer, allocated once. False: it must go
-/// through the agent.
+/// header and body in one buffer from the thread's cache. False: it must
+/// go through the agent.
 bool send_fast(asl_impl self, module_id dst, const byte_buffer& body,
                bool sign) {
   auto& cell = self->state.cfg.fast_routes;
@@ -113,10 +113,6 @@ void send_now(asl_impl self, module_id dst, const asl_message& msg,
   self->send(st.agent,
              send_packet{dst, asl_protocol, prio_normal, st.buf, sign});
 }
-
-} // namespace
-
-namespace {
 
 /// Gives the payload buffer of `msg`, if its kind has one, back to the
 /// thread's cache (channels/thread_cache.hpp): `msg` was encoded or

@@ -16,8 +16,8 @@
 #include "channels/type_ids.hpp"
 #include "channels/bundling_port.hpp"
 #include "channels/port.hpp"
-#include "channels/tx_backlog.hpp"
 #include "channels/thread_cache.hpp"
+#include "channels/tx_backlog.hpp"
 
 namespace herm {
 

@@ -1,5 +1,6 @@
 #include "channels/thread_cache.hpp"
 
+#include <algorithm>
 #include <array>
 #include <new>
 
@@ -101,14 +102,23 @@ cache_stats this_thread_buffer_cache() {
 }
 
 byte_buffer take_buffer(size_t capacity) {
-  if (!buffers.closed) {
-    // The newest that fits: the one most likely still in the CPU's cache.
-    for (size_t i = buffers.count; i > 0; --i) {
-      auto& slot = shelf.slots[i - 1];
-      if (slot.capacity() < capacity)
-        continue;
+  if (!buffers.closed && buffers.count > 0) {
+    // The smallest that fits, and not much larger than asked: a payload may
+    // be kept for a while (a reliable request waiting for its ack), and
+    // should not hold a large frame's storage meanwhile.
+    auto most = std::max(capacity * 4, buffer_cache_limits::small);
+    size_t best = buffers.count;
+    for (size_t i = 0; i < buffers.count; ++i) {
+      auto have = shelf.slots[i].capacity();
+      if (have >= capacity && have <= most
+          && (best == buffers.count
+              || have < shelf.slots[best].capacity()))
+        best = i;
+    }
+    if (best != buffers.count) {
+      auto& slot = shelf.slots[best];
       byte_buffer result = std::move(slot);
-      if (i != buffers.count)
+      if (best + 1 != buffers.count)
         slot = std::move(shelf.slots[buffers.count - 1]);
       --buffers.count;
       --buffers.stats.held;

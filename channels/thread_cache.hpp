@@ -72,13 +72,17 @@ struct buffer_cache_limits {
   /// Larger buffers are not kept (a UDP datagram fits; a reassembled
   /// packet of tens of kilobytes is rare and goes back).
   static constexpr size_t max_capacity = 8192;
+  /// take_buffer(n) hands out a kept buffer of at most max(4 n, small)
+  /// bytes, the smallest that fits.
+  static constexpr size_t small = 2048;
 };
 
 /// What the calling thread's buffer cache did since the thread started.
 cache_stats this_thread_buffer_cache();
 
-/// An empty buffer with room for at least `capacity` bytes: one the thread
-/// kept, else a new one.
+/// An empty buffer with room for at least `capacity` bytes: the smallest
+/// the thread kept that fits and is not much larger (buffer_cache_limits),
+/// else a new one.
 byte_buffer take_buffer(size_t capacity);
 
 /// Keeps the storage of `buf` for a later take_buffer on this thread

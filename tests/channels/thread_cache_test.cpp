@@ -104,6 +104,24 @@ TEST(buffer_cache, a_recycled_buffer_comes_back_with_its_storage_and_empty) {
   EXPECT_EQ(rest.data(), storage);
 }
 
+TEST(buffer_cache, hands_out_the_smallest_fit_and_no_much_larger_one) {
+  auto with_capacity = [](size_t n) {
+    byte_buffer x;
+    x.reserve(n);
+    return x;
+  };
+  recycle_buffer(with_capacity(1000));
+  recycle_buffer(with_capacity(500));
+  recycle_buffer(with_capacity(8000));
+  EXPECT_EQ(take_buffer(400).capacity(), 500u);
+  EXPECT_EQ(take_buffer(400).capacity(), 1000u);
+  // 8000 bytes for 100 asked would be kept alive with a small payload.
+  auto before = this_thread_buffer_cache();
+  EXPECT_EQ(take_buffer(100).capacity(), 100u);
+  EXPECT_EQ(this_thread_buffer_cache().allocated - before.allocated, 1u);
+  EXPECT_EQ(take_buffer(4000).capacity(), 8000u);
+}
+
 TEST(buffer_cache, keeps_at_most_its_bound_and_no_large_buffers) {
   auto before = this_thread_buffer_cache();
   for (size_t i = 0; i < buffer_cache_limits::count + 3; ++i)
