@@ -20,7 +20,7 @@
 //
 // Bounds: a thread keeps at most `block_cache_limits::per_class` free
 // blocks in each of `block_cache_limits::classes` size classes (64-byte
-// steps up to 512 bytes; larger blocks are never cached), 64 KiB at most,
+// steps up to 512 bytes; larger blocks are never cached), 72 KiB at most,
 // and at most `buffer_cache_limits::count` buffers of at most
 // `buffer_cache_limits::max_capacity` bytes, 128 KiB at most. What comes
 // back beyond that goes to the allocator (counted in `returned`). Memory
