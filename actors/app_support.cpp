@@ -54,7 +54,7 @@ bool send_fast(asl_impl self, module_id dst, const byte_buffer& body,
   h.protocol = asl_protocol;
   h.size_class = size_class_of(body.size());
   auto* hop = snap->lookup(dst, h.size_class);
-  if (hop == nullptr)
+  if (hop == nullptr || !hop->channel)
     return false;
   // Given back by the channel once written.
   auto bytes = take_buffer(header_size(h) + body.size());

@@ -321,6 +321,8 @@ caf::message take_content(caf::mailbox_element_ptr& what) {
   auto& xs = what->content();
   if (dynamic_cast<caf::message*>(&xs) != nullptr || xs.empty())
     return what->move_content_to_message();
+  // Only the values live on; the forwarding chain is not the message's.
+  what->stages.clear();
   return caf::message{
     caf::message::data_ptr{new element_data(std::move(what)), false}};
 }

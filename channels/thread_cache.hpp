@@ -32,6 +32,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 #include <utility>
 
 #include "caf/actor_cast.hpp"
@@ -152,6 +153,9 @@ public:
 template <class... Ts>
 caf::mailbox_element_ptr make_pooled_element(caf::strong_actor_ptr sender,
                                              caf::message_id mid, Ts&&... xs) {
+  static_assert(!(sizeof...(Ts) == 1
+                  && (std::is_same_v<std::decay_t<Ts>, caf::message> && ...)),
+                "a message goes in make_pooled_message_element");
   using element = pooled_element<typename caf::unbox_message_element<
     typename caf::detail::strip_and_convert<Ts>::type>::type...>;
   return caf::mailbox_element_ptr{

@@ -182,7 +182,10 @@ TEST_F(pooled_elements, wrap_a_message_as_cafs_own_wrapper_does) {
 TEST_F(pooled_elements, take_content_keeps_the_values_in_their_element) {
   auto what = caf::make_mailbox_element(nullptr, caf::make_message_id(), {},
                                         1, std::string{"two"});
+  auto* in_element = what->content().get(1);
   auto msg = take_content(what);
+  // Not copied: the message shows the values where the element holds them.
+  EXPECT_EQ(msg.cvals()->get(1), in_element);
   EXPECT_EQ(what, nullptr);
   ASSERT_TRUE((msg.match_elements<int, std::string>()));
   EXPECT_EQ(msg.get_as<int>(0), 1);
