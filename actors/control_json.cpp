@@ -179,7 +179,8 @@ json to_json(const routing_stats& s) {
           {"sources_evicted", s.sources_evicted},
           {"fast_sent", s.fast_sent},
           {"fast_routes_refused", s.fast_routes_refused},
-          {"fast_delivered", s.fast_delivered}};
+          {"fast_delivered", s.fast_delivered},
+          {"fast_forwarded", s.fast_forwarded}};
 }
 
 json to_json(const app_support_stats& s) {

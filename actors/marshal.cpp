@@ -470,6 +470,9 @@ private:
   uint32_t type_token_ = 0xFFFFFFFF;
 };
 
+static_assert(alignof(unmarshalled_data) <= __STDCPP_DEFAULT_NEW_ALIGNMENT__,
+              "cached blocks have the default new alignment");
+
 std::string element_prefix(size_t i, const std::string& name) {
   return "element " + std::to_string(i) + " (" + name + "): ";
 }
@@ -520,8 +523,10 @@ caf::error marshal_to(caf::actor_system& sys, const caf::message& msg,
 caf::expected<byte_buffer> marshal(caf::actor_system& sys,
                                    const caf::message& msg) {
   // Its storage usually comes back to the cache once the message that
-  // carries it is sent (app_support.cpp, recycle_payload).
-  auto out = take_buffer(128);
+  // carries it is sent (app_support.cpp, recycle_payload). A payload may
+  // also be kept (a parked reliable request, a topic's last value): then
+  // it holds no more than it grew to or 512 bytes.
+  auto out = take_buffer(128, 512);
   if (auto err = marshal_to(sys, msg, out))
     return err;
   return out;

@@ -102,11 +102,16 @@ cache_stats this_thread_buffer_cache() {
 }
 
 byte_buffer take_buffer(size_t capacity) {
+  // Not much larger than asked: a buffer may be kept for a while (a
+  // reliable request waiting for its ack), and should not hold a large
+  // frame's storage meanwhile.
+  return take_buffer(capacity,
+                     std::max(capacity * 4, buffer_cache_limits::small));
+}
+
+byte_buffer take_buffer(size_t capacity, size_t most) {
   if (!buffers.closed && buffers.count > 0) {
-    // The smallest that fits, and not much larger than asked: a payload may
-    // be kept for a while (a reliable request waiting for its ack), and
-    // should not hold a large frame's storage meanwhile.
-    auto most = std::max(capacity * 4, buffer_cache_limits::small);
+    // The smallest that fits.
     size_t best = buffers.count;
     for (size_t i = 0; i < buffers.count; ++i) {
       auto have = shelf.slots[i].capacity();

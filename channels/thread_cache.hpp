@@ -86,6 +86,11 @@ cache_stats this_thread_buffer_cache();
 /// else a new one.
 byte_buffer take_buffer(size_t capacity);
 
+/// Likewise, with a kept buffer of at most `most` bytes: for a buffer that
+/// may be kept a long time (a marshalled payload a parked reliable request
+/// or a topic's last value holds).
+byte_buffer take_buffer(size_t capacity, size_t most);
+
 /// Keeps the storage of `buf` for a later take_buffer on this thread
 /// (`buf` is left empty). Buffers without storage are ignored.
 void recycle_buffer(byte_buffer&& buf) noexcept;
@@ -96,7 +101,9 @@ void* cached_allocate(size_t size);
 /// Gives back a block `cached_allocate(size)` returned, on any thread.
 void cached_release(void* ptr, size_t size) noexcept;
 
-/// Gives every class that derives from it the cache's allocation.
+/// Gives every class that derives from it the cache's allocation. Its
+/// blocks have __STDCPP_DEFAULT_NEW_ALIGNMENT__; a class that derives
+/// from it asserts that it needs no more.
 struct block_cached {
   static void* operator new(size_t size) {
     return cached_allocate(size);
@@ -158,6 +165,8 @@ caf::mailbox_element_ptr make_pooled_element(caf::strong_actor_ptr sender,
                 "a message goes in make_pooled_message_element");
   using element = pooled_element<typename caf::unbox_message_element<
     typename caf::detail::strip_and_convert<Ts>::type>::type...>;
+  static_assert(alignof(element) <= __STDCPP_DEFAULT_NEW_ALIGNMENT__,
+                "cached blocks have the default new alignment");
   return caf::mailbox_element_ptr{
     new element(std::move(sender), mid, std::forward<Ts>(xs)...)};
 }

@@ -197,6 +197,8 @@ routing_stats stats_now(agent_impl self) {
     result.originated += result.fast_sent;
     result.fast_delivered = cell->delivered();
     result.delivered += result.fast_delivered;
+    result.fast_forwarded = cell->forwarded();
+    result.forwarded += result.fast_forwarded;
   }
   result.sources_evicted = st.table.sources_evicted();
   if (auto other = st.alloc->live_holder(self->clock().now())) {

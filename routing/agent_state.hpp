@@ -78,9 +78,9 @@ struct agent_state {
   byte_buffer buf;
   /// Signs and verifies packets when the network has a key.
   std::unique_ptr<authenticator> auth;
-  /// Destinations this module originated unicast packets to, whose next
-  /// hops it publishes in cfg.fast_routes (routing/fast_routes.hpp);
-  /// bounded by route_cell::max_destinations().
+  /// Destinations this module originated or forwarded unicast packets to,
+  /// whose next hops it publishes in cfg.fast_routes
+  /// (routing/fast_routes.hpp); bounded by route_cell::max_destinations().
   std::set<module_id> fast_dests;
   /// Link addresses in their link's notation ("127.0.0.1:47001"), as the
   /// channels named them when they first heard a peer (link_event
@@ -153,7 +153,7 @@ void report_neighbour(agent_impl self, const next_hop& nh, module_id id,
 /// O(|fast_dests| log N). agent_fast_routes.cpp.
 void publish_fast_routes(agent_impl self);
 
-/// Adds `dst`, just sent to through the agent, to `fast_dests` and
+/// Adds `dst`, just sent or forwarded to through the agent, to `fast_dests` and
 /// publishes; past cfg.fast_routes' bound it counts `fast_routes_refused`
 /// instead. O(|fast_dests| log N). agent_fast_routes.cpp.
 void note_fast_destination(agent_impl self, module_id dst);

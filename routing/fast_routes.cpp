@@ -6,19 +6,43 @@
 
 namespace herm {
 
+namespace {
+
+/// Puts the data packet `packet` (header `h`) for another module on the
+/// next hop `snap` publishes for it, as the agent's forward does; false
+/// when the agent must (no hop published, or its hop limit ends here:
+/// the agent counts the drop).
+bool forward(route_cell& cell, const route_snapshot& snap,
+             const data_header& h, byte_buffer& packet) {
+  if (h.hop_limit <= 1)
+    return false;
+  auto* hop = snap.lookup(h.dst, h.size_class);
+  if (hop == nullptr || !hop->channel)
+    return false;
+  set_hop_limit(packet.data(), static_cast<uint8_t>(h.hop_limit - 1));
+  pooled_anon_send(hop->channel,
+                   write_packet{hop->neighbour, h.priority, std::move(packet)});
+  cell.count_forwarded();
+  return true;
+}
+
+} // namespace
+
 bool fast_receiver::take(channel_id, link_addr, byte_buffer& packet) {
   auto snap = cell_->get();
-  if (snap == nullptr || snap->receivers.empty())
+  if (snap == nullptr)
     return false;
   auto type = peek_type(packet.data(), packet.size());
   if (!type || *type != packet_type::data)
     return false;
   auto h = decode_data_header(packet.data(), packet.size());
-  // Broadcasts (duplicate suppression, relaying), packets for others
-  // (forwarding) and signed ones (which a keyless module refuses) are the
-  // agent's; so is a header that does not decode (counted there).
-  if (!h || h->dst != snap->self || h->authenticated)
+  // Broadcasts (duplicate suppression, relaying) and signed packets (which
+  // a keyless module refuses) are the agent's; so is a header that does
+  // not decode (counted there).
+  if (!h || h->dst == broadcast_module || h->authenticated)
     return false;
+  if (h->dst != snap->self)
+    return forward(*cell_, *snap, *h, packet);
   auto i = snap->receivers.find(h->protocol);
   if (i == snap->receivers.end())
     return false;

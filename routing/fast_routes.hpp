@@ -6,14 +6,15 @@
 // puts a unicast data packet for one of them straight on the next hop's
 // channel, without a turn through the agent. On the way in, a unicast data
 // packet for the module goes from the channel that received it straight to
-// the receiver of its protocol (fast_receiver, below). Hellos, updates,
-// claims, broadcasts, authentication, tracing and forwarding stay with the
-// agent; so does every packet the snapshot does not cover.
+// the receiver of its protocol, and one for another module straight to the
+// channel of its next hop (fast_receiver, below). Hellos, updates, claims,
+// broadcasts, authentication and tracing stay with the agent; so does every
+// packet the snapshot does not cover.
 //
 // Who publishes what (agent_fast_routes.cpp, publish_fast_routes): only while
 // the module has an address, no network key, no tracer or observer, and
 // has not said goodbye; its receivers, and routes only for destinations
-// this module originated a unicast packet to (at most
+// this module originated or forwarded a unicast packet to (at most
 // `route_cell::max_destinations()`, counted in
 // routing_stats::fast_routes_refused beyond); republished whenever a
 // selected route to one of them changes (a channel that ends takes its
@@ -144,21 +145,38 @@ public:
     return delivered_.load(std::memory_order_relaxed);
   }
 
+  /// Counts one packet forwarded through the snapshot (the agent adds
+  /// these to routing_stats::forwarded).
+  void count_forwarded() noexcept {
+    forwarded_.fetch_add(1, std::memory_order_relaxed);
+  }
+
+  uint64_t forwarded() const noexcept {
+    return forwarded_.load(std::memory_order_relaxed);
+  }
+
 private:
   const size_t max_destinations_;
   mutable std::mutex mtx_;
   std::shared_ptr<const route_snapshot> snapshot_;
   std::atomic<uint64_t> sent_{0};
   std::atomic<uint64_t> delivered_{0};
+  std::atomic<uint64_t> forwarded_{0};
 };
 
-/// The receive half: the IO manager's packet tap (channels/packet_tap.hpp)
-/// that hands a unicast data packet for this module, unsigned, of a
-/// protocol with a receiver, from the channel straight to that receiver,
-/// its routing header cut off in place (no copy). Everything else (a
-/// packet the snapshot does not cover, none published, or one that does
-/// not decode) is left to the channel's reader, the routing agent, which
-/// counts what is malformed. Order: as for sending (above).
+/// The receive half: the IO manager's packet tap (channels/packet_tap.hpp).
+/// It hands an unsigned unicast data packet
+/// - for this module, of a protocol with a receiver, from the channel
+///   straight to that receiver, its routing header cut off in place (no
+///   copy);
+/// - for another module with a published next hop in its size class and a
+///   hop limit above 1, one hop limit less, straight to that hop's channel
+///   (the same buffer), as the agent's forward would.
+///
+/// Everything else (a packet the snapshot does not cover, none published,
+/// a hop limit that ends here, or one that does not decode) is left to the
+/// channel's reader, the routing agent, which counts what it drops. Order:
+/// as for sending (above).
 class fast_receiver : public packet_tap {
 public:
   explicit fast_receiver(std::shared_ptr<route_cell> cell)

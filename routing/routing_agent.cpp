@@ -379,6 +379,8 @@ void forward(agent_impl self, const data_header& h, byte_buffer bytes,
   set_hop_limit(bytes.data(), static_cast<uint8_t>(h.hop_limit - 1));
   ++st.stats.forwarded;
   transmit(self, packet_trace::forwarded, h, *nh, std::move(bytes), false, in);
+  // The next packets for it take the fast path (fast_receiver).
+  note_fast_destination(self, h.dst);
 }
 
 void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {

@@ -247,13 +247,16 @@ struct routing_stats {
   /// The data path of established routes (routing/fast_routes.hpp): data
   /// packets the module's senders put straight on a channel (counted in
   /// `originated` too), and destinations left out of the snapshot because
-  /// it held route_cell::max_destinations() already (one per packet sent to
-  /// them through the agent).
+  /// it held route_cell::max_destinations() already (one per packet sent or
+  /// forwarded to them through the agent).
   uint64_t fast_sent = 0;
   uint64_t fast_routes_refused = 0;
   /// Data packets for this module's receivers that went from the channel
   /// straight to them (fast_receiver; counted in `delivered` too).
   uint64_t fast_delivered = 0;
+  /// Data packets for other modules that went from the channel straight to
+  /// the next hop's channel (fast_receiver; counted in `forwarded` too).
+  uint64_t fast_forwarded = 0;
 };
 
 template <class Inspector>
@@ -272,7 +275,8 @@ typename Inspector::result_type inspect(Inspector& f, routing_stats& x) {
            x.rx_neighbours_over_limit, x.seqno_requests_over_limit,
            x.floods_evicted, x.flood_ids_evicted, x.sources_evicted,
            x.id_conflicts, x.id_conflict_instance, x.id_conflict_heard,
-           x.fast_sent, x.fast_routes_refused, x.fast_delivered);
+           x.fast_sent, x.fast_routes_refused, x.fast_delivered,
+           x.fast_forwarded);
 }
 
 /// Learns each change of a destination's selected route (reachability).

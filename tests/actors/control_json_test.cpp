@@ -272,12 +272,12 @@ TEST(control_json_types, routing_counters_have_the_protocol_names) {
   s.instance = 42;
   s.delivered = 16;
   auto j = to_json(s);
-  EXPECT_EQ(keys(j).size(), 48u);
+  EXPECT_EQ(keys(j).size(), 49u);
   for (auto k : {"self", "instance", "assigned", "reachable", "delivered",
                  "forwarded", "dropped_no_route", "rx_auth_failed",
                  "id_conflicts", "id_conflict", "destinations", "routes",
                  "neighbours", "floods_evicted", "sources_evicted", "fast_sent",
-                 "fast_routes_refused", "fast_delivered"})
+                 "fast_routes_refused", "fast_delivered", "fast_forwarded"})
     EXPECT_TRUE(j.contains(k)) << k;
   EXPECT_EQ(j["self"], "0x30");
   EXPECT_EQ(j["instance"], 42);

@@ -122,6 +122,17 @@ TEST(buffer_cache, hands_out_the_smallest_fit_and_no_much_larger_one) {
   EXPECT_EQ(take_buffer(4000).capacity(), 8000u);
 }
 
+TEST(buffer_cache, a_buffer_kept_long_comes_from_a_tighter_bound) {
+  byte_buffer kept;
+  kept.reserve(1024);
+  recycle_buffer(std::move(kept));
+  // Within the default bound of take_buffer(128), not within 512.
+  auto before = this_thread_buffer_cache();
+  EXPECT_EQ(take_buffer(128, 512).capacity(), 128u);
+  EXPECT_EQ(this_thread_buffer_cache().allocated - before.allocated, 1u);
+  EXPECT_EQ(take_buffer(128).capacity(), 1024u);
+}
+
 TEST(buffer_cache, keeps_at_most_its_bound_and_no_large_buffers) {
   auto before = this_thread_buffer_cache();
   for (size_t i = 0; i < buffer_cache_limits::count + 3; ++i)

@@ -140,14 +140,14 @@ TEST_F(fast_routes_test, a_channel_with_a_second_reader_gives_every_packet_to_it
   caf::anon_send_exit(capture, caf::exit_reason::user_shutdown);
 }
 
-TEST_F(fast_routes_test, broadcasts_packets_for_others_and_unknown_protocols_stay_with_the_agent) {
+TEST_F(fast_routes_test, broadcasts_unknown_protocols_and_a_first_packet_for_another_module_stay_with_the_agent) {
   auto cell = std::make_shared<route_cell>();
   auto net = ring6(cell);
   auto before = net.stats(0);
   // A flooded broadcast: duplicate suppression and relaying are the agent's.
   net.send(3, broadcast_module);
   EXPECT_EQ(net.at(0).received->size(), 1u);
-  // 1 -> 5 is forwarded by 0 (1-0-5).
+  // 1 -> 5 is forwarded by 0 (1-0-5); no route to 5 is published before.
   auto tag = net.send(1, id_of(5));
   EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(1), id_of(5)}));
   // A protocol nobody receives: the agent drops and counts it.
@@ -157,8 +157,72 @@ TEST_F(fast_routes_test, broadcasts_packets_for_others_and_unknown_protocols_sta
   auto after = net.stats(0);
   EXPECT_EQ(after.fast_delivered, before.fast_delivered);
   EXPECT_EQ(after.forwarded, before.forwarded + 1);
+  EXPECT_EQ(after.fast_forwarded, before.fast_forwarded);
   EXPECT_EQ(after.dropped_no_receiver, before.dropped_no_receiver + 1);
   EXPECT_EQ(net.at(0).received->size(), 1u);
+}
+
+TEST_F(fast_routes_test, once_forwarded_a_packet_for_another_module_goes_from_channel_to_channel) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  // 1 -> 5 goes 1-0-5: the first through module 0's agent, which then
+  // publishes its next hop to 5.
+  net.send(1, id_of(5));
+  auto snap = cell->get();
+  ASSERT_NE(snap, nullptr);
+  ASSERT_NE(snap->lookup(id_of(5), 0), nullptr);
+  auto before = net.stats(0);
+  auto tag = net.send(1, id_of(5), 40);
+  EXPECT_EQ(net.path(tag), (std::vector<module_id>{id_of(1), id_of(5)}));
+  auto after = net.stats(0);
+  EXPECT_EQ(after.fast_forwarded, before.fast_forwarded + 1);
+  EXPECT_EQ(after.forwarded, before.forwarded + 1);
+  // As the agent forwards it: one hop limit less, payload untouched.
+  ASSERT_EQ(net.at(5).received->size(), 2u);
+  auto& got = net.at(5).received->back();
+  EXPECT_EQ(got.src, id_of(1));
+  EXPECT_EQ(got.hops, 2);
+  ASSERT_EQ(got.payload.size(), 40u);
+  uint64_t seen = 0;
+  for (int i = 0; i < 8; ++i)
+    seen |= uint64_t{got.payload[i]} << (8 * i);
+  EXPECT_EQ(seen, tag);
+}
+
+TEST_F(fast_routes_test, a_packet_whose_hop_limit_ends_here_or_without_a_published_hop_stays_with_the_agent) {
+  auto cell = std::make_shared<route_cell>();
+  auto net = ring6(cell);
+  net.send(1, id_of(5));
+  ASSERT_NE(cell->get(), nullptr);
+  fast_receiver tap{cell};
+  auto packet_for = [](module_id dst, uint8_t hop_limit) {
+    data_header h;
+    h.src = id_of(1);
+    h.dst = dst;
+    h.hop_limit = hop_limit;
+    byte_buffer bytes;
+    encode(h, bytes);
+    bytes.resize(bytes.size() + 8, 7);
+    return bytes;
+  };
+  // The agent drops it and counts dropped_hop_limit.
+  auto last_hop = packet_for(id_of(5), 1);
+  auto copy = last_hop;
+  EXPECT_FALSE(tap.take(1, 0, last_hop));
+  EXPECT_EQ(last_hop, copy);
+  // No route to 4 published: the agent looks it up.
+  auto unknown = packet_for(id_of(4), 5);
+  copy = unknown;
+  EXPECT_FALSE(tap.take(1, 0, unknown));
+  EXPECT_EQ(unknown, copy);
+  EXPECT_EQ(net.stats(0).fast_forwarded, 0u);
+  // With a hop limit left it is taken, one hop limit less, and arrives.
+  auto taken = packet_for(id_of(5), 2);
+  EXPECT_TRUE(tap.take(1, 0, taken));
+  net.run();
+  EXPECT_EQ(net.stats(0).fast_forwarded, 1u);
+  ASSERT_EQ(net.at(5).received->size(), 2u);
+  EXPECT_EQ(net.at(5).received->back().hops, default_hop_limit);
 }
 
 TEST_F(fast_routes_test, a_destination_sent_to_is_published_with_its_selected_next_hop) {
@@ -226,6 +290,31 @@ TEST_F(fast_routes_test, destinations_past_the_bound_are_refused_and_counted) {
   EXPECT_NE(snap->lookup(id_of(2), 0), nullptr);
   // 3 once, 4 twice: every packet sent through the agent for want of room.
   EXPECT_EQ(net.stats(0).fast_routes_refused, 3u);
+}
+
+TEST_F(fast_routes_test, destinations_forwarded_to_past_the_bound_are_refused_and_counted) {
+  // 0-1-2-3, module 1 publishing room for one destination: it forwards
+  // 0's packets for 2 and for 3.
+  auto cell = std::make_shared<route_cell>(1);
+  auto net = build(line(4, false), [cell](sim_network& n) {
+    n.at(1).cfg.observer = nullptr;
+    n.at(1).cfg.fast_routes = cell;
+  });
+  net.advance(1s);
+  net.send(0, id_of(2));
+  net.send(0, id_of(3));
+  net.send(0, id_of(3));
+  auto snap = cell->get();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_EQ(snap->routes.size(), 1u);
+  EXPECT_NE(snap->lookup(id_of(2), 0), nullptr);
+  EXPECT_EQ(snap->lookup(id_of(3), 0), nullptr);
+  auto st = net.stats(1);
+  EXPECT_EQ(st.fast_routes_refused, 2u);
+  // Every packet for 3 still arrives, through the agent.
+  EXPECT_EQ(st.forwarded, 3u);
+  EXPECT_EQ(st.fast_forwarded, 0u);
+  EXPECT_EQ(net.at(3).received->size(), 2u);
 }
 
 TEST_F(fast_routes_test, the_agent_counts_what_its_senders_sent_on_the_fast_path) {
