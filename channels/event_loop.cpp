@@ -17,6 +17,7 @@
 
 #include "channels/drivers/posix.hpp"
 #include "channels/error.hpp"
+#include "channels/lax_timer.hpp"
 
 namespace herm {
 
@@ -324,6 +325,16 @@ event_loop& io_loop_of(caf::actor_system& sys) {
   if (auto* owner = dynamic_cast<loop_owner*>(&sys.scheduler()))
     return owner->io_loop();
   return shared_io_loop();
+}
+
+void schedule_lax(caf::actor_system& sys, caf::actor_clock::time_point t,
+                  caf::actor_clock::time_point latest,
+                  caf::strong_actor_ptr receiver,
+                  caf::mailbox_element_ptr content) {
+  if (auto* owner = dynamic_cast<loop_owner*>(&sys.scheduler()))
+    owner->schedule_lax(t, latest, std::move(receiver), std::move(content));
+  else
+    sys.clock().schedule_message(t, std::move(receiver), std::move(content));
 }
 
 } // namespace herm

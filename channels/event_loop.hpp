@@ -11,6 +11,7 @@
 // on another CAF scheduler get one io_thread per process (io_loop_of).
 
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -23,6 +24,7 @@
 
 #include "caf/error.hpp"
 #include "caf/expected.hpp"
+#include "caf/fwd.hpp"
 
 struct epoll_event;
 
@@ -235,6 +237,14 @@ class loop_owner {
 public:
   virtual ~loop_owner();
   virtual event_loop& io_loop() = 0;
+
+  /// Delivers `content` to `receiver` on a wake of the loop at or after
+  /// `t`, at `latest` at the latest (channels/lax_timer.hpp).
+  virtual void schedule_lax(std::chrono::steady_clock::time_point t,
+                            std::chrono::steady_clock::time_point latest,
+                            caf::strong_actor_ptr receiver,
+                            caf::mailbox_element_ptr content)
+    = 0;
 };
 
 /// One io_thread shared by the whole process, started on first use and

@@ -5,7 +5,8 @@
 // before it sends it to its reader, and the tap may deliver it itself. The
 // routing agent's fast path (routing/fast_routes.hpp, fast_receiver) is one:
 // a data packet for one of its module's own receivers goes from the channel
-// straight to that receiver's mailbox, without a turn through the agent.
+// straight to that receiver's mailbox, and one for another module straight
+// to the channel of its next hop, without a turn through the agent.
 
 #include <memory>
 

@@ -102,8 +102,8 @@ void* cached_allocate(size_t size);
 void cached_release(void* ptr, size_t size) noexcept;
 
 /// Gives every class that derives from it the cache's allocation. Its
-/// blocks have __STDCPP_DEFAULT_NEW_ALIGNMENT__; a class that derives
-/// from it asserts that it needs no more.
+/// blocks have __STDCPP_DEFAULT_NEW_ALIGNMENT__: a class that derives from
+/// it must need no more (those that hold values of any type assert it).
 struct block_cached {
   static void* operator new(size_t size) {
     return cached_allocate(size);

@@ -78,10 +78,13 @@ struct agent_state {
   byte_buffer buf;
   /// Signs and verifies packets when the network has a key.
   std::unique_ptr<authenticator> auth;
-  /// Destinations this module originated or forwarded unicast packets to,
-  /// whose next hops it publishes in cfg.fast_routes
-  /// (routing/fast_routes.hpp); bounded by route_cell::max_destinations().
+  /// Destinations this module originated unicast packets to, and others it
+  /// forwarded unicast packets to, whose next hops it publishes in
+  /// cfg.fast_routes (routing/fast_routes.hpp); each bounded by
+  /// route_cell::max_destinations(), disjoint. A destination leaves when
+  /// the table forgets it.
   std::set<module_id> fast_dests;
+  std::set<module_id> fast_transit;
   /// Link addresses in their link's notation ("127.0.0.1:47001"), as the
   /// channels named them when they first heard a peer (link_event
   /// peer_heard): what neighbours, routes and logs show instead of the
@@ -147,16 +150,19 @@ inline std::string link_address_text(agent_impl self, const next_hop& nh) {
 void report_neighbour(agent_impl self, const next_hop& nh, module_id id,
                       uint64_t instance, bool up, const char* reason);
 
-/// Publishes the next hops of `fast_dests` in cfg.fast_routes, or
+/// Publishes the next hops of `fast_dests` and `fast_transit` in
+/// cfg.fast_routes (dropping those the table forgot), or
 /// withdraws the snapshot while the fast path is not allowed (no address,
 /// a key, a tracer or observer, leaving). No-op without a cell.
 /// O(|fast_dests| log N). agent_fast_routes.cpp.
 void publish_fast_routes(agent_impl self);
 
-/// Adds `dst`, just sent or forwarded to through the agent, to `fast_dests` and
-/// publishes; past cfg.fast_routes' bound it counts `fast_routes_refused`
-/// instead. O(|fast_dests| log N). agent_fast_routes.cpp.
-void note_fast_destination(agent_impl self, module_id dst);
+/// Adds `dst`, just sent to through the agent, to `fast_dests` (or, when
+/// `forwarded`, to `fast_transit`) and publishes; past cfg.fast_routes'
+/// bound it counts `fast_routes_refused` instead. O(|fast_dests| log N).
+/// agent_fast_routes.cpp.
+void note_fast_destination(agent_impl self, module_id dst,
+                           bool forwarded = false);
 
 // -- sending (routing_agent.cpp) ------------------------------------------------
 

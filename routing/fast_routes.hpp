@@ -2,8 +2,8 @@
 
 // The data path of established routes (docs/architecture.md, "Threads"):
 // the routing agent publishes the next hops of the destinations its module
-// sends to as an immutable snapshot, and the application support layer
-// puts a unicast data packet for one of them straight on the next hop's
+// sends or forwards to as an immutable snapshot, and the application
+// support layer puts a unicast data packet for one of them straight on the next hop's
 // channel, without a turn through the agent. On the way in, a unicast data
 // packet for the module goes from the channel that received it straight to
 // the receiver of its protocol, and one for another module straight to the
@@ -14,17 +14,19 @@
 // Who publishes what (agent_fast_routes.cpp, publish_fast_routes): only while
 // the module has an address, no network key, no tracer or observer, and
 // has not said goodbye; its receivers, and routes only for destinations
-// this module originated or forwarded a unicast packet to (at most
-// `route_cell::max_destinations()`, counted in
-// routing_stats::fast_routes_refused beyond); republished whenever a
+// this module originated a unicast packet to and for others it forwarded
+// one to (at most `route_cell::max_destinations()` of each, so transit
+// traffic never takes the places of the module's own destinations;
+// counted in routing_stats::fast_routes_refused beyond; a destination
+// the routing table forgot gives its place back); republished whenever a
 // selected route to one of them changes (a channel that ends takes its
 // routes with it, so that is such a change), a receiver subscribes or the
 // module's address changes; withdrawn when the agent ends.
 //
 // Order: a packet sent through the snapshot may overtake one sent through
 // the agent just before the snapshot appeared or changed (as a route change
-// may reorder packets anyway); packets sent through one path keep their
-// order.
+// may reorder packets anyway): a flow may be reordered once, when it moves
+// to the fast path; packets sent through one path keep their order.
 //
 // Thread-safety: a snapshot never changes once published; the cell is
 // read and written under a mutex, from any thread.
@@ -102,9 +104,10 @@ struct route_snapshot {
 /// module.
 class route_cell {
 public:
-  /// `max_destinations`: how many destinations a snapshot covers at most.
-  /// A module sends to tens of others, and the snapshot is rebuilt whole
-  /// when a route to one of them changes.
+  /// `max_destinations`: how many destinations the module sends to, and
+  /// how many others it forwards to, a snapshot covers at most. A module
+  /// sends to tens of others, and the snapshot is rebuilt whole when a
+  /// route to one of them changes.
   explicit route_cell(size_t max_destinations = 256)
     : max_destinations_(max_destinations) {
     // nop

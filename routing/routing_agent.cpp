@@ -14,6 +14,7 @@
 
 #include "caf/actor_system.hpp"
 
+#include "channels/lax_timer.hpp"
 #include "routing/agent_state.hpp"
 #include "routing/error.hpp"
 
@@ -186,9 +187,11 @@ void apply_change(agent_impl self, const table_change& change) {
   auto& st = self->state;
   // The snapshot follows at once: a packet must not leave on a next hop
   // the table gave up one mailbox turn ago.
-  if (!st.fast_dests.empty()
-      && std::any_of(change.changed.begin(), change.changed.end(),
-                     [&](module_id d) { return st.fast_dests.count(d) > 0; }))
+  auto published = [&](module_id d) {
+    return st.fast_dests.count(d) > 0 || st.fast_transit.count(d) > 0;
+  };
+  if ((!st.fast_dests.empty() || !st.fast_transit.empty())
+      && std::any_of(change.changed.begin(), change.changed.end(), published))
     publish_fast_routes(self);
   if (!st.route_listeners.empty())
     st.pending_told.insert(change.changed.begin(), change.changed.end());
@@ -380,7 +383,7 @@ void forward(agent_impl self, const data_header& h, byte_buffer bytes,
   ++st.stats.forwarded;
   transmit(self, packet_trace::forwarded, h, *nh, std::move(bytes), false, in);
   // The next packets for it take the fast path (fast_receiver).
-  note_fast_destination(self, h.dst);
+  note_fast_destination(self, h.dst, true);
 }
 
 void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
@@ -629,7 +632,8 @@ void tick(agent_impl self) {
   apply_change(self, change);
   if (auto due = st.alloc->next_deadline(); due && *due <= now)
     act(self, st.alloc->tick(now));
-  self->delayed_send(self, st.cfg.hello_interval / 4, atom::tick_v);
+  // Lax: on a busy loop the tick rides on a wake the traffic makes.
+  delayed_send_lax(self, st.cfg.hello_interval / 4, atom::tick_v);
   if (!hello_due)
     return;
   if (++st.ticks % st.cfg.update_every == 0)

@@ -25,6 +25,7 @@
 #include "channels/drivers/posix.hpp"
 #include "channels/error.hpp"
 #include "channels/event_loop.hpp"
+#include "channels/lax_timer.hpp"
 
 namespace herm {
 
@@ -48,6 +49,8 @@ public:
     caf::strong_actor_ptr target;
     caf::message_id id;
     caf::mailbox_element_ptr content;
+    /// A lax timer's latest time (loop_clock::schedule_lax).
+    time_point latest{};
   };
 
   bool empty() const {
@@ -66,6 +69,14 @@ public:
     x.seq = next_seq_++;
     xs_.push_back(std::move(x));
     sift_up(xs_.size() - 1);
+  }
+
+  /// The earliest `latest` of all entries, or time_point::max(). O(n).
+  time_point earliest_latest() const {
+    auto result = time_point::max();
+    for (auto& x : xs_)
+      result = std::min(result, x.latest);
+    return result;
   }
 
   /// Moves every entry due at `t` to `out`, earliest first.
@@ -146,9 +157,10 @@ private:
 /// The actor clock of the loop, behind a mutex. The loop thread asks it for
 /// the next due time before it sleeps and fires what is due after each
 /// wait; another thread that sets a timeout wakes the loop so it recomputes
-/// its wait. Delayed messages and request timeouts, nearly all of the
-/// timers, are in heaps of its own (timer_heap); the rare rest (receive and
-/// stream timeouts, delayed group messages) in CAF's simple clock.
+/// its wait. Delayed messages, lax ones (channels/lax_timer.hpp) and
+/// request timeouts, nearly all of the timers, are in heaps of its own
+/// (timer_heap); the rare rest (receive and stream timeouts, delayed group
+/// messages) in CAF's simple clock.
 class loop_clock final : public caf::detail::simple_actor_clock {
 public:
   using super = caf::detail::simple_actor_clock;
@@ -173,6 +185,7 @@ public:
       wake = std::min(wake, messages_.front().due);
     if (!requests_.empty())
       wake = std::min(wake, requests_.front().due + request_timeout_slack);
+    wake = std::min(wake, lax_.earliest_latest());
     if (wake == time_point::max())
       return std::numeric_limits<int64_t>::max();
     auto d = wake - now();
@@ -196,6 +209,7 @@ public:
       fired = trigger_expired_timeouts();
       auto t = now();
       messages_.take_due(t, due_);
+      lax_.take_due(t, due_);
       requests_.take_due(t, due_);
     }
     // Shipped outside the lock, as simple_actor_clock::ship would.
@@ -275,6 +289,17 @@ public:
     });
   }
 
+  /// A delayed message due at `t` that may wait until `latest` for a wake
+  /// the loop makes anyway (channels/lax_timer.hpp).
+  void schedule_lax(time_point t, time_point latest,
+                    caf::strong_actor_ptr receiver,
+                    caf::mailbox_element_ptr content) {
+    locked([&] {
+      lax_.push({t, 0, std::move(receiver), caf::message_id{},
+                 std::move(content), latest});
+    });
+  }
+
   void schedule_message(time_point t, caf::group target,
                         caf::strong_actor_ptr sender,
                         caf::message content) override {
@@ -288,10 +313,12 @@ public:
     // Destroyed after the lock is released: the last handle to an actor may
     // go with them, and its cleanup cancels its timeouts here.
     timer_heap messages;
+    timer_heap lax;
     timer_heap requests;
     locked([&] {
       super::cancel_all();
       std::swap(messages, messages_);
+      std::swap(lax, lax_);
       std::swap(requests, requests_);
     }, false);
   }
@@ -318,6 +345,9 @@ private:
   event_loop& loop_;
   std::atomic<bool> changed_{false};
   timer_heap messages_;
+  /// Delayed messages due at their time, fired at their latest time at
+  /// the latest (schedule_lax); a few per module.
+  timer_heap lax_;
   timer_heap requests_;
   /// What fire_due ships (loop thread only), kept for its capacity.
   std::vector<timer_heap::entry> due_;
@@ -350,6 +380,13 @@ public:
 
   event_loop& io_loop() override {
     return *loop_;
+  }
+
+  void schedule_lax(caf::actor_clock::time_point t,
+                    caf::actor_clock::time_point latest,
+                    caf::strong_actor_ptr receiver,
+                    caf::mailbox_element_ptr content) override {
+    clock_.schedule_lax(t, latest, std::move(receiver), std::move(content));
   }
 
   // -- abstract_coordinator ---------------------------------------------------------

@@ -13,6 +13,8 @@
 #include <future>
 #include <mutex>
 #include <set>
+#include <string>
+#include <tuple>
 #include <thread>
 #include <vector>
 
@@ -25,10 +27,12 @@
 #include "caf/event_based_actor.hpp"
 #include "caf/scoped_actor.hpp"
 #include "caf/send.hpp"
+#include "caf/stateful_actor.hpp"
 
 #include "actors/runtime/system.hpp"
 #include "channels/drivers/posix.hpp"
 #include "channels/event_loop.hpp"
+#include "channels/lax_timer.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
@@ -232,6 +236,100 @@ TEST_F(loop_system, delayed_messages_due_at_the_same_time_arrive_in_the_order_se
   EXPECT_EQ(*got, want);
 }
 
+/// Sets a lax timer every `period` until told to stop ("stop" as a
+/// string); counts what fired and what fired before its time.
+struct housekeeper_state {
+  int64_t due_ns = 0;
+  int fired = 0;
+  int early = 0;
+  bool stopped = false;
+};
+
+static caf::behavior housekeeper(caf::stateful_actor<housekeeper_state>* self,
+                          std::chrono::milliseconds period) {
+  auto arm = [self, period] {
+    self->state.due_ns = posix::now_ns()
+                         + std::chrono::nanoseconds(period).count();
+    delayed_send_lax(self, period, caf::tick_atom::value);
+  };
+  arm();
+  return {
+    [self, arm](caf::tick_atom) {
+      if (posix::now_ns() < self->state.due_ns)
+        ++self->state.early;
+      ++self->state.fired;
+      if (!self->state.stopped)
+        arm();
+    },
+    [self](const std::string&) {
+      self->state.stopped = true;
+      return std::make_tuple(self->state.fired, self->state.early);
+    },
+  };
+}
+
+TEST_F(loop_system, lax_timers_fire_on_wakes_the_loop_makes_anyway_and_never_early) {
+  // A client ticks every 2 ms (ordinary timers), 150 times; meanwhile a
+  // housekeeper sets a lax timer every 24 ms (3 ms of slack). The loop
+  // sleeps about once per tick: a due lax timer rides along with the next
+  // tick instead of waking the loop (about 12 more sleeps as ordinary
+  // timers).
+  constexpr int ticks = 150;
+  caf::actor_system sys{cfg};
+  std::promise<void> done;
+  auto client = sys.spawn([&](caf::event_based_actor* self) {
+    auto left = std::make_shared<int>(ticks);
+    return caf::behavior{[=, &done](caf::tick_atom) {
+      if (--*left < 0) {
+        done.set_value();
+        self->quit();
+        return;
+      }
+      self->delayed_send(self, 2ms, caf::tick_atom::value);
+    }};
+  });
+  std::this_thread::sleep_for(50ms); // the spawns settle, the loop sleeps
+  auto before = loop_stats_of(sys);
+  auto keeper = sys.spawn(housekeeper, 24ms);
+  caf::anon_send(client, caf::tick_atom::value);
+  auto fut = done.get_future();
+  ASSERT_EQ(fut.wait_for(30s), std::future_status::ready);
+  auto sleeps = loop_stats_of(sys).sleeps - before.sleeps;
+  caf::scoped_actor self{sys};
+  int fired = 0;
+  int early = 0;
+  self->request(keeper, 10s, std::string{"stop"})
+    .receive([&](int f, int e) { fired = f; early = e; },
+             [&](caf::error& err) { FAIL() << sys.render(err); });
+  // About 12 in 300 ms; fewer on a loaded machine, never none.
+  EXPECT_GE(fired, 5);
+  EXPECT_EQ(early, 0);
+  EXPECT_GE(sleeps, static_cast<uint64_t>(ticks / 2));
+  // Without the slack: about ticks + fired.
+  EXPECT_LE(sleeps, static_cast<uint64_t>(ticks + fired / 2))
+    << "lax timers woke the loop on their own (" << fired << " fired)";
+  caf::anon_send_exit(keeper, caf::exit_reason::user_shutdown);
+}
+
+TEST_F(loop_system, a_lax_timer_alone_wakes_the_loop_itself) {
+  caf::actor_system sys{cfg};
+  std::promise<void> done;
+  int64_t sent = 0;
+  int64_t arrived = 0;
+  sys.spawn([&](caf::event_based_actor* self) {
+    sent = posix::now_ns();
+    delayed_send_lax(self, 30ms, caf::tick_atom::value);
+    return caf::behavior{[&, self](caf::tick_atom) {
+      arrived = posix::now_ns();
+      done.set_value();
+      self->quit();
+    }};
+  });
+  auto fut = done.get_future();
+  ASSERT_EQ(fut.wait_for(30s), std::future_status::ready);
+  EXPECT_GE(arrived - sent, 30'000'000);
+}
+
 TEST_F(loop_system, a_request_without_reply_times_out_with_a_typed_error) {
   caf::actor_system sys{cfg};
   auto silent = sys.spawn([](caf::event_based_actor*) -> caf::behavior {
@@ -353,6 +451,23 @@ TEST(loop_scheduler, busy_polls_before_sleeping_when_configured_and_still_sleeps
   auto s = loop_stats_of(sys);
   EXPECT_GT(s.busy_polls, 0u);
   EXPECT_GT(s.sleeps, 0u);
+}
+
+TEST(loop_scheduler, a_lax_timer_on_another_scheduler_is_an_ordinary_delayed_message) {
+  caf::actor_system_config cfg;
+  configure(cfg, "sharing", 1);
+  caf::actor_system sys{cfg};
+  auto keeper = sys.spawn(housekeeper, 2ms);
+  std::this_thread::sleep_for(50ms);
+  caf::scoped_actor self{sys};
+  self->request(keeper, 10s, std::string{"stop"})
+    .receive(
+      [&](int fired, int early) {
+        EXPECT_GE(fired, 1);
+        EXPECT_EQ(early, 0);
+      },
+      [&](caf::error& err) { FAIL() << sys.render(err); });
+  caf::anon_send_exit(keeper, caf::exit_reason::user_shutdown);
 }
 
 TEST(loop_scheduler, stats_are_zero_on_another_scheduler) {

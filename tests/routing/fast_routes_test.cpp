@@ -205,7 +205,7 @@ TEST_F(fast_routes_test, a_packet_whose_hop_limit_ends_here_or_without_a_publish
     bytes.resize(bytes.size() + 8, 7);
     return bytes;
   };
-  // The agent drops it and counts dropped_hop_limit.
+  // Left to the agent (which drops it and counts dropped_hop_limit).
   auto last_hop = packet_for(id_of(5), 1);
   auto copy = last_hop;
   EXPECT_FALSE(tap.take(1, 0, last_hop));
@@ -262,8 +262,8 @@ TEST_F(fast_routes_test, the_snapshot_follows_a_route_change_at_once) {
             after->lookup(id_of(2), 0)->channel);
 }
 
-TEST_F(fast_routes_test, an_unreachable_destination_leaves_the_snapshot) {
-  auto cell = std::make_shared<route_cell>();
+TEST_F(fast_routes_test, an_unreachable_destination_leaves_the_snapshot_and_gives_its_place_back) {
+  auto cell = std::make_shared<route_cell>(1);
   auto net = build(line(3, false), publishing(cell));
   net.advance(1s);
   net.send(0, id_of(2));
@@ -275,6 +275,13 @@ TEST_F(fast_routes_test, an_unreachable_destination_leaves_the_snapshot) {
   auto snap = cell->get();
   ASSERT_NE(snap, nullptr);
   EXPECT_EQ(snap->lookup(id_of(2), 0), nullptr);
+  // Room for one destination: 2's place is free again once the table
+  // forgets it (its retracted routes expire).
+  net.advance(60s);
+  net.send(0, id_of(1));
+  ASSERT_NE(cell->get(), nullptr);
+  EXPECT_NE(cell->get()->lookup(id_of(1), 0), nullptr);
+  EXPECT_EQ(net.stats(0).fast_routes_refused, 0u);
 }
 
 TEST_F(fast_routes_test, destinations_past_the_bound_are_refused_and_counted) {
@@ -315,6 +322,10 @@ TEST_F(fast_routes_test, destinations_forwarded_to_past_the_bound_are_refused_an
   EXPECT_EQ(st.forwarded, 3u);
   EXPECT_EQ(st.fast_forwarded, 0u);
   EXPECT_EQ(net.at(3).received->size(), 2u);
+  // The module's own destinations have a place of their own.
+  net.send(1, id_of(0));
+  EXPECT_NE(cell->get()->lookup(id_of(0), 0), nullptr);
+  EXPECT_EQ(net.stats(1).fast_routes_refused, 2u);
 }
 
 TEST_F(fast_routes_test, the_agent_counts_what_its_senders_sent_on_the_fast_path) {
