@@ -173,6 +173,10 @@ TEST_F(board_hermd, corrupted_and_dropped_bytes_are_counted_and_survived) {
   start_sensor();
   start_board({"--echo", "echo", "--publish", "noise", "--period-ms", "50"});
   expect_route_to_board();
+  // A subscriber on the far module, so that the board's publications cross
+  // the line: hellos alone are too few bytes for the noise to hit surely.
+  auto sub = peer({"subscribe", "--topic", "noise", "--count", "100000"});
+  ASSERT_TRUE(sub->wait_for_line_containing("value ", 30s)) << sub->output();
   herm::test::line_faults noisy;
   noisy.drop = 0.003;
   noisy.flip = 0.003;
@@ -180,6 +184,8 @@ TEST_F(board_hermd, corrupted_and_dropped_bytes_are_counted_and_survived) {
   // The board talks (hellos, a publication every 50 ms) through the noise.
   std::this_thread::sleep_for(4s);
   cable_->set_faults({});
+  sub->terminate();
+  sub->wait(10s);
   auto call = peer({"call", "--name", "echo", "--count", "10", "--size", "60"});
   auto out = finish(*call, 60s);
   EXPECT_NE(out.find("done ok=10 failed=0"), std::string::npos) << out;
