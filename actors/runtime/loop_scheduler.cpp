@@ -50,7 +50,7 @@ public:
     caf::message_id id;
     caf::mailbox_element_ptr content;
     /// A lax timer's latest time (loop_clock::schedule_lax).
-    time_point latest{};
+    time_point latest = time_point::max();
   };
 
   bool empty() const {
