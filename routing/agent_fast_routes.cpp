@@ -8,6 +8,18 @@
 
 namespace herm::agent_detail {
 
+namespace {
+
+/// Gives back the places of destinations the table no longer holds (not
+/// even retracted); the next packet sent or forwarded to one of them
+/// through the agent takes a place again.
+void forget_unknown(agent_state& st, std::set<module_id>& dests) {
+  for (auto d = dests.begin(); d != dests.end();)
+    d = st.table.advertisement(*d) ? std::next(d) : dests.erase(d);
+}
+
+} // namespace
+
 void publish_fast_routes(agent_impl self) {
   auto& st = self->state;
   auto& cell = st.cfg.fast_routes;
@@ -25,43 +37,31 @@ void publish_fast_routes(agent_impl self) {
   snap->self = st.table.self();
   for (auto& [protocol, receiver] : st.receivers)
     snap->receivers.emplace(protocol, receiver);
-  // A destination the table no longer holds (not even retracted) gives
-  // its place back; the next packet sent or forwarded to it through the
-  // agent takes one again.
-  auto add = [&](std::set<module_id>& dests) {
-    for (auto d = dests.begin(); d != dests.end();) {
-      if (!st.table.advertisement(*d)) {
-        d = dests.erase(d);
-        continue;
-      }
-      auto& hops = snap->routes[*d];
+  for (auto* dests : {&st.fast_dests, &st.fast_transit}) {
+    forget_unknown(st, *dests);
+    for (auto dst : *dests) {
+      auto& hops = snap->routes[dst];
       for (uint8_t k = 0; k < size_classes; ++k)
-        if (auto nh = st.table.lookup(*d, k))
+        if (auto nh = st.table.lookup(dst, k))
           if (auto i = st.channels.find(nh->channel); i != st.channels.end())
             hops[k] = fast_hop{i->second.handle, nh->neighbour};
-      ++d;
     }
-  };
-  add(st.fast_dests);
-  add(st.fast_transit);
+  }
   cell->publish(std::move(snap));
 }
 
 void note_fast_destination(agent_impl self, module_id dst, bool forwarded) {
   auto& st = self->state;
-  if (!st.cfg.fast_routes || st.fast_dests.count(dst) > 0)
+  if (!st.cfg.fast_routes || st.fast_dests.count(dst) > 0
+      || (forwarded && st.fast_transit.count(dst) > 0))
     return;
   // Originated or forwarded, each with a budget of its own: traffic
   // through the module never takes the places of its own destinations.
   auto& dests = forwarded ? st.fast_transit : st.fast_dests;
-  if (forwarded && dests.count(dst) > 0)
-    return;
-  if (dests.size() >= st.cfg.fast_routes->max_destinations()) {
-    // Full: the places of destinations the table forgot are free.
-    for (auto d = dests.begin(); d != dests.end();)
-      d = st.table.advertisement(*d) ? std::next(d) : dests.erase(d);
-  }
-  if (dests.size() >= st.cfg.fast_routes->max_destinations()) {
+  auto bound = st.cfg.fast_routes->max_destinations();
+  if (dests.size() >= bound)
+    forget_unknown(st, dests);
+  if (dests.size() >= bound) {
     ++st.stats.fast_routes_refused;
     return;
   }
