@@ -25,7 +25,6 @@
 #include "channels/drivers/posix.hpp"
 #include "channels/error.hpp"
 #include "channels/event_loop.hpp"
-#include "channels/lax_timer.hpp"
 
 namespace herm {
 
