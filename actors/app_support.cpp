@@ -81,9 +81,16 @@ bool needs_fast_tick(const asl_state& st) {
 void schedule_tick(asl_impl self, std::chrono::milliseconds period) {
   auto& st = self->state;
   st.tick_fast = period <= st.cfg.tick;
-  st.tick_at = self->clock().now() + period;
-  // Lax: on a busy loop the tick rides on a wake the traffic makes.
-  delayed_send_lax(self, period, atom::tick_v, ++st.tick_generation);
+  // Lax: on a busy loop the tick rides on a wake the traffic makes. Nothing
+  // fine-grained waits on the slow tick (needs_fast_tick), so it may come
+  // up to half its period late: on an idle module it then runs on a wake
+  // the routing agent's quarter tick or a neighbour's hello makes instead
+  // of waking the loop itself.
+  auto slack = st.tick_fast ? lax_slack(period) : caf::timespan{period / 2};
+  auto t = self->clock().now() + period;
+  // The latest time it comes: what slow_tick_too_late must assume.
+  st.tick_at = t + slack;
+  send_lax_at(self, t, slack, atom::tick_v, ++st.tick_generation);
 }
 
 /// Whether the slow tick comes too late for what sending `msg` starts.

@@ -75,7 +75,7 @@ struct asl_state {
   /// The housekeeping tick: only the tick of the latest generation counts
   /// (an earlier one, superseded when a request brought the tick forward,
   /// is ignored), whether it runs at cfg.tick (else cfg.idle_tick), and
-  /// when the latest one comes.
+  /// the latest time the current one comes (it is a lax timer).
   uint64_t tick_generation = 0;
   bool tick_fast = true;
   caf::actor_clock::time_point tick_at;

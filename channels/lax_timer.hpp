@@ -7,8 +7,9 @@
 // such a lax timer fires on the first wake of the loop at or after its
 // time, whatever woke it (a packet, another timer), and wakes the loop
 // itself only at its latest time: its delay plus an eighth of it, at most
-// lax_timer_slack (a tick that sets the next one when it runs stretches
-// its period by at most that much). So a module busy with traffic runs its
+// lax_timer_slack. A tick that sets the next one from now when it runs
+// stretches its period by up to that much; one that counts from its last
+// due time (send_lax_at) does not. So a module busy with traffic runs its
 // ticks on the wakes the traffic makes, and ticks set in the same turn go
 // on firing together. Elsewhere (CAF's schedulers, the test coordinator)
 // it is an ordinary delayed message, due exactly.
@@ -40,18 +41,32 @@ void schedule_lax(caf::actor_system& sys, caf::actor_clock::time_point t,
                   caf::strong_actor_ptr receiver,
                   caf::mailbox_element_ptr content);
 
-/// Sends `xs` from `self` to itself after `delay`, as self->delayed_send
-/// would, but lax (above). No type check: `xs` must be a message `self`
+/// How late a lax timer set `delay` ahead may fire: an eighth of the delay,
+/// at most lax_timer_slack.
+constexpr caf::timespan lax_slack(caf::timespan delay) {
+  return std::min<caf::timespan>(delay / 8, lax_timer_slack);
+}
+
+/// Sends `xs` from `self` to itself at `t`, lax, at `t + slack` at the
+/// latest. A periodic tick that sets its next time from the last one's
+/// (`t += period`) instead of from now keeps its period on average however
+/// late each one fires. No type check: `xs` must be a message `self`
 /// handles.
 template <class Self, class... Ts>
-void delayed_send_lax(Self* self, caf::timespan delay, Ts&&... xs) {
+void send_lax_at(Self* self, caf::actor_clock::time_point t,
+                 caf::timespan slack, Ts&&... xs) {
   static_assert(sizeof...(Ts) > 0, "no message to send");
-  auto& sys = self->system();
-  auto t = sys.clock().now() + delay;
-  auto slack = std::min<caf::timespan>(delay / 8, lax_timer_slack);
-  schedule_lax(sys, t, t + slack, self->ctrl(),
+  schedule_lax(self->system(), t, t + slack, self->ctrl(),
                caf::make_mailbox_element(self->ctrl(), caf::make_message_id(),
                                          {}, std::forward<Ts>(xs)...));
+}
+
+/// Sends `xs` from `self` to itself after `delay`, as self->delayed_send
+/// would, but lax (above): at most lax_slack(delay) late.
+template <class Self, class... Ts>
+void delayed_send_lax(Self* self, caf::timespan delay, Ts&&... xs) {
+  send_lax_at(self, self->system().clock().now() + delay, lax_slack(delay),
+              std::forward<Ts>(xs)...);
 }
 
 } // namespace herm

@@ -68,9 +68,17 @@ struct agent_state {
   std::set<module_id> pending_told;
   routing_stats stats;
   uint16_t hello_seqno = 0;
-  /// Hello intervals and quarter intervals since start.
+  /// Hello intervals since start.
   uint32_t ticks = 0;
-  uint32_t quarters = 0;
+  /// The housekeeping tick (routing_agent.cpp, "timer"): when the next
+  /// hello is due, when the tick on its way is due, and its generation
+  /// (a tick brought forward supersedes the one on its way). Hellos are
+  /// due an interval after the last one was due, not after it went out,
+  /// so ticks that fire late (lax) do not stretch the hello interval.
+  caf::actor_clock::time_point next_hello{};
+  caf::actor_clock::time_point next_tick{};
+  uint64_t tick_generation = 0;
+  bool in_tick = false;
   /// Said goodbye: sends no more hellos.
   bool leaving = false;
   /// Where the other holder of our static id was last reported heard.

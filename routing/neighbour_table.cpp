@@ -63,11 +63,8 @@ std::vector<next_hop> neighbour_table::expire(time_point now,
                                               std::vector<neighbour>* was) {
   std::vector<next_hop> lost;
   for (auto i = neighbours_.begin(); i != neighbours_.end();) {
-    auto interval = std::max(i->second.interval, limits_.hello_interval);
-    auto limit = std::chrono::duration_cast<duration>(interval
-                                                      * limits_.hello_loss);
     auto next = std::next(i);
-    if (now - i->second.last_hello > limit) {
+    if (now - i->second.last_hello > silence_limit(i->second)) {
       lost.push_back(i->first);
       if (was != nullptr)
         was->push_back(i->second);
@@ -76,6 +73,24 @@ std::vector<next_hop> neighbour_table::expire(time_point now,
     i = next;
   }
   return lost;
+}
+
+std::optional<neighbour_table::time_point>
+neighbour_table::next_expiry() const {
+  std::optional<time_point> first;
+  for (auto& [at, n] : neighbours_) {
+    // expire() drops it once the silence exceeds the limit.
+    auto t = n.last_hello + silence_limit(n) + duration{1};
+    if (!first || t < *first)
+      first = t;
+  }
+  return first;
+}
+
+neighbour_table::duration
+neighbour_table::silence_limit(const neighbour& n) const {
+  auto interval = std::max(n.interval, limits_.hello_interval);
+  return std::chrono::duration_cast<duration>(interval * limits_.hello_loss);
 }
 
 const neighbour_table::neighbour*

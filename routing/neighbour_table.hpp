@@ -15,6 +15,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <vector>
 
 #include "routing/module_id.hpp"
@@ -83,6 +84,10 @@ public:
   std::vector<next_hop> expire(time_point now,
                                std::vector<neighbour>* was = nullptr);
 
+  /// The earliest time at which expire() drops a neighbour, if one is held.
+  /// O(n).
+  std::optional<time_point> next_expiry() const;
+
   /// The neighbour at `at`, or nullptr. O(log n).
   const neighbour* find(const next_hop& at) const;
 
@@ -102,6 +107,9 @@ public:
 
 private:
   void erase(std::map<next_hop, neighbour>::iterator i);
+
+  /// How long `n` may stay silent before it is lost.
+  duration silence_limit(const neighbour& n) const;
 
   limits limits_;
   std::map<next_hop, neighbour> neighbours_;

@@ -540,6 +540,22 @@ update_result route_table::update(next_hop from, const advertised& adv,
   return update_result::accepted;
 }
 
+std::optional<route_table::time_point> route_table::next_expiry() const {
+  auto& s = *impl_;
+  std::optional<time_point> first;
+  auto consider = [&first](time_point t) {
+    if (!first || t < *first)
+      first = t;
+  };
+  if (!s.expiries.empty())
+    consider(std::get<0>(*s.expiries.begin()));
+  if (!s.tombstones.empty())
+    consider(s.tombstones.begin()->first);
+  if (!s.idle_sources.empty())
+    consider(s.idle_sources.begin()->first + s.source_hold());
+  return first;
+}
+
 table_change route_table::expire(time_point now) {
   auto& s = *impl_;
   table_change out;

@@ -159,6 +159,10 @@ public:
   /// Drops routes whose hold time ran out (and sources unused for long).
   table_change expire(time_point now);
 
+  /// The earliest time at which expire() drops a route, a tombstone or an
+  /// idle source, if any is held. O(1).
+  std::optional<time_point> next_expiry() const;
+
   // -- what to advertise ---------------------------------------------------------------
 
   /// What this module advertises for `dest`: the selected routes' metrics

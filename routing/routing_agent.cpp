@@ -260,6 +260,8 @@ void on_dispute(agent_impl self, const address_allocator::dispute& d,
                           + "): not joining; a static id must be unique"));
 }
 
+void tick_for_allocator(agent_impl self);
+
 void act(agent_impl self, address_allocator::actions acts,
          const std::string& where = "") {
   auto& st = self->state;
@@ -293,6 +295,7 @@ void act(agent_impl self, address_allocator::actions acts,
     send_update(self, {st.table.self()});
     publish_fast_routes(self);
   }
+  tick_for_allocator(self);
 }
 
 // -- data packets ---------------------------------------------------------------
@@ -598,12 +601,78 @@ void on_packet(agent_impl self, packet_received& pkt) {
 
 // -- timer ----------------------------------------------------------------------
 
-/// Runs every quarter hello interval: liveness, expiry and addressing; every
-/// fourth time also hellos, periodic updates and announcements.
+// The housekeeping tick runs on a grid of quarter hello intervals that ends
+// at the next hello: at every hello (hellos, periodic updates and
+// announcements), and between hellos only at the first grid point at or
+// after something expires (a neighbour, a route, a seqno request) or the
+// address allocator must act. So an idle module ticks about once per hello
+// interval instead of four times, and a silently failed link is still
+// noticed within a quarter interval of its neighbour's expiry.
+
+using agent_time = caf::actor_clock::time_point;
+
+caf::timespan quarter_of(const agent_state& st) {
+  return caf::timespan{st.cfg.hello_interval / 4};
+}
+
+/// The first point of the tick grid at or after `t`; the next hello when
+/// `t` is after it.
+agent_time grid_point_from(const agent_state& st, agent_time t) {
+  if (t >= st.next_hello)
+    return st.next_hello;
+  return st.next_hello - ((st.next_hello - t) / quarter_of(st)) * quarter_of(st);
+}
+
+/// The earliest time something the tick handles falls due, if anything.
+std::optional<agent_time> next_deadline(const agent_state& st) {
+  std::optional<agent_time> first;
+  for (auto t : {st.neighbours.next_expiry(), st.requested.next_expiry(),
+                 st.table.next_expiry(), st.alloc->next_deadline()})
+    if (t && (!first || *t < *first))
+      first = t;
+  return first;
+}
+
+/// Sends the next tick, due at `due`; one already on its way no longer
+/// counts.
+void schedule_tick(agent_impl self, agent_time due) {
+  auto& st = self->state;
+  st.next_tick = due;
+  // Lax: on a busy loop the tick rides on a wake the traffic makes.
+  send_lax_at(self, due, lax_slack(quarter_of(st)), atom::tick_v,
+              ++st.tick_generation);
+}
+
+/// Brings the tick forward when the address allocator must act before it
+/// (a claim started between ticks).
+void tick_for_allocator(agent_impl self) {
+  auto& st = self->state;
+  if (st.in_tick || st.tick_generation == 0)
+    return;
+  auto due = st.alloc->next_deadline();
+  if (!due)
+    return;
+  auto t = grid_point_from(st, std::max(*due, self->clock().now()));
+  if (t < st.next_tick)
+    schedule_tick(self, t);
+}
+
+/// Liveness, expiry and addressing; at a hello also hellos, periodic
+/// updates and announcements.
 void tick(agent_impl self) {
   auto& st = self->state;
+  st.in_tick = true;
   auto now = self->clock().now();
-  bool hello_due = st.quarters++ % 4 == 0;
+  // When this tick was due: its grid point (the first tick: now).
+  auto due = st.tick_generation > 1 ? st.next_tick : now;
+  bool hello_due = due >= st.next_hello;
+  if (hello_due) {
+    // An interval after the last one was due; late by a whole interval
+    // (or the first), the grid starts afresh.
+    st.next_hello += st.cfg.hello_interval;
+    if (st.next_hello <= now)
+      st.next_hello = now + st.cfg.hello_interval;
+  }
   if (hello_due && !st.leaving)
     send_hellos(self);
   // Neighbours silent for too long are gone.
@@ -630,24 +699,27 @@ void tick(agent_impl self) {
   change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
                        change.changed.end());
   apply_change(self, change);
-  if (auto due = st.alloc->next_deadline(); due && *due <= now)
+  if (auto deadline = st.alloc->next_deadline(); deadline && *deadline <= now)
     act(self, st.alloc->tick(now));
-  // Lax: on a busy loop the tick rides on a wake the traffic makes.
-  delayed_send_lax(self, st.cfg.hello_interval / 4, atom::tick_v);
-  if (!hello_due)
-    return;
-  if (++st.ticks % st.cfg.update_every == 0)
-    send_update(self, st.table.destinations());
-  if (st.alloc->assigned() && st.ticks % st.cfg.announce_every == 0) {
-    // An announcement is a claim whose nonce is the claimant's instance (a
-    // fresh claim's nonce is random): receivers treat it as "this id is in
-    // use by that instance" and apply the merge rule (a static id's holder
-    // names itself holder: address_allocator.hpp).
-    claim announce{st.alloc->id(), st.alloc->instance(), st.alloc->instance(),
-                   default_hop_limit};
-    send_all(self, encoded(self, announce));
-    ++st.stats.tx_claims;
+  if (hello_due) {
+    if (++st.ticks % st.cfg.update_every == 0)
+      send_update(self, st.table.destinations());
+    if (st.alloc->assigned() && st.ticks % st.cfg.announce_every == 0) {
+      // An announcement is a claim whose nonce is the claimant's instance
+      // (a fresh claim's nonce is random): receivers treat it as "this id
+      // is in use by that instance" and apply the merge rule (a static
+      // id's holder names itself holder: address_allocator.hpp).
+      claim announce{st.alloc->id(), st.alloc->instance(),
+                     st.alloc->instance(), default_hop_limit};
+      send_all(self, encoded(self, announce));
+      ++st.stats.tx_claims;
+    }
   }
+  auto deadline = next_deadline(st);
+  schedule_tick(self, deadline ? grid_point_from(st, std::max(*deadline,
+                                                              due + caf::timespan{1}))
+                               : st.next_hello);
+  st.in_tick = false;
 }
 
 // -- requests from above --------------------------------------------------------
@@ -790,7 +862,7 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
              ls.end());
   });
   act(self, self->state.alloc->start(self->clock().now()));
-  self->send(self, atom::tick_v);
+  self->send(self, atom::tick_v, ++self->state.tick_generation);
   return {
     [self](send_packet& msg) { originate(self, msg); },
     [self](atom::send, send_packet& msg) -> caf::result<void> {
@@ -847,7 +919,10 @@ routing_agent_actor::behavior_type agent_fun(agent_impl self,
         st.peer_names[next_hop{ev.channel, ev.peer}] = ev.detail;
     },
     [self](atom::close) { return leave(self); },
-    [self](atom::tick) { tick(self); },
+    [self](atom::tick, uint64_t generation) {
+      if (generation == self->state.tick_generation)
+        tick(self);
+    },
     [self](atom::flush) { flush_changes(self); },
   };
 }

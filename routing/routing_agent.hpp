@@ -306,7 +306,8 @@ using routing_agent_actor = caf::typed_actor<
   caf::reacts_to<channel_up>, caf::reacts_to<channel_down>,
   caf::reacts_to<packet_received>, caf::reacts_to<link_event>,
   // -- timers -----------------------------------------------------------------
-  caf::reacts_to<atom::tick>,
+  /// The housekeeping tick; only the latest generation counts.
+  caf::reacts_to<atom::tick, uint64_t>,
   /// Sends the triggered updates collected while processing a burst.
   caf::reacts_to<atom::flush>>;
 

@@ -31,4 +31,12 @@ void seqno_requests::expire(time_point now) {
     i = now - i->second >= limits_.interval ? sent_.erase(i) : std::next(i);
 }
 
+std::optional<seqno_requests::time_point> seqno_requests::next_expiry() const {
+  std::optional<time_point> first;
+  for (auto& [dst, sent] : sent_)
+    if (!first || sent + limits_.interval < *first)
+      first = sent + limits_.interval;
+  return first;
+}
+
 } // namespace herm

@@ -15,6 +15,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <optional>
 
 #include "routing/module_id.hpp"
 
@@ -55,6 +56,10 @@ public:
   /// Forgets the destinations requested an interval ago or more: they no
   /// longer hold back new ones. O(remembered).
   void expire(time_point now);
+
+  /// The earliest time at which expire() forgets a destination, if one is
+  /// remembered. O(remembered).
+  std::optional<time_point> next_expiry() const;
 
   /// Destinations remembered now.
   size_t size() const {

@@ -200,16 +200,21 @@ public:
     f.order = std::min(priority, can::max_priority);
     f.bits = can::frame_bits(cfg_.format, f.frame.len, cfg_.stuffing);
     f.enqueued_at = now_ns();
-    std::lock_guard<std::mutex> guard{gate_.mutex()};
-    if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
-      return err;
-    f.seq = next_seq_++;
-    queue_.push_back(f);
-    std::push_heap(queue_.begin(), queue_.end(), later);
-    // Published before send() returns: from now on, the frame takes part
-    // in every arbitration on the bus.
-    publish(queue_.front());
-    gate_.notify();
+    bool wake = false;
+    {
+      std::lock_guard<std::mutex> guard{gate_.mutex()};
+      if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
+        return err;
+      f.seq = next_seq_++;
+      queue_.push_back(f);
+      std::push_heap(queue_.begin(), queue_.end(), later);
+      // Published before send() returns: from now on, the frame takes
+      // part in every arbitration on the bus.
+      publish(queue_.front());
+      wake = gate_.must_wake();
+    }
+    if (wake)
+      gate_.wake();
     return caf::none;
   }
 

@@ -248,15 +248,20 @@ public:
     if (station_.failed())
       return make_error(ec::device_failed, prefix_ + "the link has failed");
     auto enqueued_at = now_ns();
-    std::lock_guard<std::mutex> guard{gate_.mutex()};
-    if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
-      return err;
-    tx_frame f;
-    f.bytes = emu_medium::copy_reusing(spare_, data, size);
-    f.dst = dst;
-    f.enqueued_at = enqueued_at;
-    queue_.push_back(std::move(f));
-    gate_.notify();
+    bool wake = false;
+    {
+      std::lock_guard<std::mutex> guard{gate_.mutex()};
+      if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
+        return err;
+      tx_frame f;
+      f.bytes = emu_medium::copy_reusing(spare_, data, size);
+      f.dst = dst;
+      f.enqueued_at = enqueued_at;
+      queue_.push_back(std::move(f));
+      wake = gate_.must_wake();
+    }
+    if (wake)
+      gate_.wake();
     return caf::none;
   }
 

@@ -287,11 +287,19 @@ public:
   caf::error admit(size_t queued, size_t capacity,
                    const std::string& prefix) const;
 
-  /// send(), lock held, after queueing: wakes a transmit thread waiting for
-  /// work.
-  void notify() {
-    if (idle_)
-      cv_.notify_one();
+  /// send(), lock held, after queueing: whether the transmit thread waits
+  /// for work. Then call wake() once the lock is released, so that the
+  /// thread does not wake only to block on the lock the caller still holds
+  /// (one more sleep and wake of it per frame).
+  bool must_wake() const {
+    return idle_;
+  }
+
+  /// Any thread, lock not held: wakes a transmit thread waiting for work
+  /// (must_wake). A wake it does not need is harmless: it checks its queue
+  /// and sleeps again.
+  void wake() {
+    cv_.notify_one();
   }
 
   /// Transmit thread, lock held by `lk`: sleeps until `has_work()` or

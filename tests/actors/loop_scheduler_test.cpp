@@ -236,8 +236,9 @@ TEST_F(loop_system, delayed_messages_due_at_the_same_time_arrive_in_the_order_se
   EXPECT_EQ(*got, want);
 }
 
-/// Sets a lax timer every `period` until told to stop ("stop" as a
-/// string); counts what fired and what fired before its time.
+/// Sets a lax timer every `period` with `slack` (0: lax_slack(period))
+/// until told to stop ("stop" as a string); counts what fired and what
+/// fired before its time.
 struct housekeeper_state {
   int64_t due_ns = 0;
   int fired = 0;
@@ -246,11 +247,16 @@ struct housekeeper_state {
 };
 
 static caf::behavior housekeeper(caf::stateful_actor<housekeeper_state>* self,
-                          std::chrono::milliseconds period) {
-  auto arm = [self, period] {
+                                 std::chrono::milliseconds period,
+                                 std::chrono::milliseconds slack) {
+  auto arm = [self, period, slack] {
     self->state.due_ns = posix::now_ns()
                          + std::chrono::nanoseconds(period).count();
-    delayed_send_lax(self, period, caf::tick_atom::value);
+    if (slack.count() == 0)
+      delayed_send_lax(self, period, caf::tick_atom::value);
+    else
+      send_lax_at(self, self->clock().now() + period, slack,
+                  caf::tick_atom::value);
   };
   arm();
   return {
@@ -268,13 +274,19 @@ static caf::behavior housekeeper(caf::stateful_actor<housekeeper_state>* self,
   };
 }
 
-TEST_F(loop_system, lax_timers_fire_on_wakes_the_loop_makes_anyway_and_never_early) {
-  // A client ticks every 2 ms (ordinary timers), 150 times; meanwhile a
-  // housekeeper sets a lax timer every 24 ms (3 ms of slack). The loop
-  // sleeps about once per tick: a due lax timer rides along with the next
-  // tick instead of waking the loop (about 12 more sleeps as ordinary
-  // timers).
-  constexpr int ticks = 150;
+struct lax_run {
+  uint64_t sleeps = 0; // of the loop while the client ticked
+  int fired = 0;       // lax timers
+  int early = 0;       // lax timers that fired before their time
+};
+
+/// A client ticks `ticks` times every `tick` (ordinary timers) while a
+/// housekeeper sets a lax timer every `period` with `slack`.
+static lax_run run_beside_a_ticking_client(caf::actor_system_config& cfg,
+                                           int ticks,
+                                           std::chrono::milliseconds tick,
+                                           std::chrono::milliseconds period,
+                                           std::chrono::milliseconds slack) {
   caf::actor_system sys{cfg};
   std::promise<void> done;
   auto client = sys.spawn([&](caf::event_based_actor* self) {
@@ -285,30 +297,56 @@ TEST_F(loop_system, lax_timers_fire_on_wakes_the_loop_makes_anyway_and_never_ear
         self->quit();
         return;
       }
-      self->delayed_send(self, 2ms, caf::tick_atom::value);
+      self->delayed_send(self, tick, caf::tick_atom::value);
     }};
   });
   std::this_thread::sleep_for(50ms); // the spawns settle, the loop sleeps
   auto before = loop_stats_of(sys);
-  auto keeper = sys.spawn(housekeeper, 24ms);
+  auto keeper = sys.spawn(housekeeper, period, slack);
   caf::anon_send(client, caf::tick_atom::value);
+  lax_run result;
   auto fut = done.get_future();
-  ASSERT_EQ(fut.wait_for(30s), std::future_status::ready);
-  auto sleeps = loop_stats_of(sys).sleeps - before.sleeps;
+  if (fut.wait_for(30s) != std::future_status::ready) {
+    ADD_FAILURE() << "the client did not finish";
+    return result;
+  }
+  result.sleeps = loop_stats_of(sys).sleeps - before.sleeps;
   caf::scoped_actor self{sys};
-  int fired = 0;
-  int early = 0;
   self->request(keeper, 10s, std::string{"stop"})
-    .receive([&](int f, int e) { fired = f; early = e; },
-             [&](caf::error& err) { FAIL() << sys.render(err); });
-  // About 12 in 300 ms; fewer on a loaded machine, never none.
-  EXPECT_GE(fired, 5);
-  EXPECT_EQ(early, 0);
-  EXPECT_GE(sleeps, static_cast<uint64_t>(ticks / 2));
-  // Without the slack: about ticks + fired.
-  EXPECT_LE(sleeps, static_cast<uint64_t>(ticks + fired / 2))
-    << "lax timers woke the loop on their own (" << fired << " fired)";
+    .receive([&](int f, int e) { result.fired = f; result.early = e; },
+             [&](caf::error& err) { ADD_FAILURE() << sys.render(err); });
   caf::anon_send_exit(keeper, caf::exit_reason::user_shutdown);
+  return result;
+}
+
+TEST_F(loop_system, lax_timers_fire_on_wakes_the_loop_makes_anyway_and_never_early) {
+  // A client ticks every 2 ms, 150 times; meanwhile a housekeeper sets a
+  // lax timer every 24 ms (3 ms of slack). The loop sleeps about once per
+  // tick: a due lax timer rides along with the next tick instead of waking
+  // the loop (about 12 more sleeps as ordinary timers).
+  constexpr int ticks = 150;
+  auto run = run_beside_a_ticking_client(cfg, ticks, 2ms, 24ms, 0ms);
+  // About 12 in 300 ms; fewer on a loaded machine, never none.
+  EXPECT_GE(run.fired, 5);
+  EXPECT_EQ(run.early, 0);
+  EXPECT_GE(run.sleeps, static_cast<uint64_t>(ticks / 2));
+  // Without the slack: about ticks + fired.
+  EXPECT_LE(run.sleeps, static_cast<uint64_t>(ticks + run.fired / 2))
+    << "lax timers woke the loop on their own (" << run.fired << " fired)";
+}
+
+TEST_F(loop_system, a_lax_timer_with_a_wide_slack_rides_on_slower_wakes) {
+  // As application support's idle tick: a lax timer every 30 ms that may
+  // come 30 ms late, beside a client ticking every 20 ms, 40 times. Every
+  // window of 30 ms holds a client tick, so the lax timers never wake the
+  // loop themselves; with the default slack (3.75 ms) most would.
+  constexpr int ticks = 40;
+  auto run = run_beside_a_ticking_client(cfg, ticks, 20ms, 30ms, 30ms);
+  // About 20 in 800 ms; fewer on a loaded machine, never none.
+  EXPECT_GE(run.fired, 5);
+  EXPECT_EQ(run.early, 0);
+  EXPECT_LE(run.sleeps, static_cast<uint64_t>(ticks + run.fired / 2))
+    << "lax timers woke the loop on their own (" << run.fired << " fired)";
 }
 
 TEST_F(loop_system, a_lax_timer_alone_wakes_the_loop_itself) {
@@ -457,7 +495,7 @@ TEST(loop_scheduler, a_lax_timer_on_another_scheduler_is_an_ordinary_delayed_mes
   caf::actor_system_config cfg;
   configure(cfg, "sharing", 1);
   caf::actor_system sys{cfg};
-  auto keeper = sys.spawn(housekeeper, 2ms);
+  auto keeper = sys.spawn(housekeeper, 2ms, 0ms);
   std::this_thread::sleep_for(50ms);
   caf::scoped_actor self{sys};
   self->request(keeper, 10s, std::string{"stop"})

@@ -156,6 +156,10 @@ TEST(neighbour_table, silence_past_hello_loss_intervals_loses_a_neighbour) {
     neighbour_table t{lim};
     t.heard({1, 7}, 0x107, 1, c.said, t0);
     t.heard({1, 8}, 0x108, 1, c.said, t0 + c.silent);
+    // The earliest time expire() drops one (the agent's next tick).
+    auto next = t.next_expiry();
+    ASSERT_TRUE(next);
+    EXPECT_EQ(*next <= t0 + c.silent, c.lost);
     auto lost = t.expire(t0 + c.silent);
     EXPECT_EQ(lost.size(), c.lost ? 1u : 0u);
     if (c.lost) {
@@ -173,4 +177,5 @@ TEST(neighbour_table, lost_neighbours_come_back_in_next_hop_order) {
   auto lost = t.expire(t0 + 10s);
   EXPECT_EQ(lost, (std::vector<next_hop>{{1, 3}, {1, 9}, {2, 1}}));
   EXPECT_EQ(t.size(), 0u);
+  EXPECT_EQ(t.next_expiry(), std::nullopt);
 }

@@ -795,21 +795,25 @@ TEST(route_table, routes_expire_after_hold_unless_refreshed) {
   feed(t, n, adv(0x42, 1, 5, {link_code::can20}), t0);
   auto out = feed(t, n, adv(0x42, 1, 5, {link_code::can20}), t0 + 5s);
   EXPECT_TRUE(out.changed.empty()); // a refresh changes nothing
+  EXPECT_EQ(t.next_expiry(), t0 + 15s);
   struct {
     std::chrono::seconds at;
     bool routed;
     bool advertised; // known at all (retracted or not)
     bool changed;
+    std::chrono::seconds next; // next_expiry() afterwards
   } timeline[] = {
-    {9s, true, true, false},   // within the first hold
-    {14s, true, true, false},  // refreshed at 5s: expires at 15s
-    {15s, false, true, true},  // expired: retracted, reported
-    {20s, false, true, false}, // still advertised as retracted
-    {25s, false, false, false}, // forgotten one hold later
+    {9s, true, true, false, 15s},   // within the first hold
+    {14s, true, true, false, 15s},  // refreshed at 5s: expires at 15s
+    {15s, false, true, true, 25s},  // expired: retracted, reported
+    {20s, false, true, false, 25s}, // still advertised as retracted
+    // Forgotten one hold later; its source is kept for 5 minutes.
+    {25s, false, false, false, 325s},
   };
   for (auto& step : timeline) {
     SCOPED_TRACE(std::to_string(step.at.count()) + "s");
     out = t.expire(t0 + step.at);
+    EXPECT_EQ(t.next_expiry(), t0 + step.next);
     EXPECT_EQ(t.lookup(0x42, 0).has_value(), step.routed);
     EXPECT_EQ(t.advertisement(0x42).has_value(), step.advertised);
     EXPECT_EQ(contains(out.changed, 0x42), step.changed);

@@ -85,6 +85,7 @@ TEST(seqno_requests, expiry_forgets_requests_an_interval_old_and_makes_room) {
   auto r = with_bound(2);
   r.request(1, t0);
   r.request(2, t0 + 500ms);
+  EXPECT_EQ(r.next_expiry(), t0 + 1s);
   r.expire(t0 + 999ms);
   EXPECT_EQ(r.size(), 2u);
   EXPECT_EQ(r.request(3, t0 + 999ms), decision::over_limit);
@@ -92,7 +93,9 @@ TEST(seqno_requests, expiry_forgets_requests_an_interval_old_and_makes_room) {
   EXPECT_EQ(r.size(), 1u);
   EXPECT_EQ(r.request(3, t0 + 1s), decision::send);
   EXPECT_EQ(r.request(4, t0 + 1s), decision::over_limit);
+  EXPECT_EQ(r.next_expiry(), t0 + 1500ms);
   r.expire(t0 + 2s);
   EXPECT_EQ(r.size(), 0u);
+  EXPECT_EQ(r.next_expiry(), std::nullopt);
   EXPECT_EQ(r.over_limit(), 2u);
 }

@@ -12,6 +12,7 @@
 #include "tests/support/topology.hpp"
 #include "tests/support/actor_fixture.hpp"
 #include "actors/testing/sim_network.hpp"
+#include "channels/lax_timer.hpp"
 
 using namespace herm;
 using namespace herm::test;
@@ -98,6 +99,27 @@ public:
     EXPECT_EQ(net.loops(), 0u);
   }
 };
+
+/// Fires every timer due within `span` from now `late` after its time (as
+/// a lax timer may on the loop scheduler), running the actors after each.
+/// Returns the number fired.
+size_t fire_timers_late(sim_network& net, caf::timespan span,
+                        caf::timespan late) {
+  auto& h = net.harness();
+  auto& clk = h.sched.clock();
+  auto end = clk.current_time + span;
+  size_t fired = 0;
+  h.sched.run();
+  while (!clk.schedule().empty() && clk.schedule().begin()->first + late <= end) {
+    clk.current_time = std::max(clk.current_time,
+                                clk.schedule().begin()->first + late);
+    clk.trigger_timeout();
+    h.sched.run();
+    ++fired;
+  }
+  clk.current_time = end;
+  return fired;
+}
 
 } // namespace
 
@@ -505,6 +527,45 @@ TEST_F(routing_sim, routes_from_a_neighbour_with_slower_hellos_hold_between_its_
     ADD_FAILURE() << "route to " << to_hex(r.id) << " changed: reachable "
                   << r.reachable << ", was " << r.was_reachable;
   EXPECT_TRUE(net.route(0, id_of(2)));
+}
+
+// On the loop scheduler the quarter tick is a lax timer: it may fire up to
+// its slack late (an eighth of a quarter interval, at most 20 ms). Here
+// every timer fires that late. The next tick counts from when the last one
+// was due, so the hellos keep their interval; counted from when it fired,
+// each interval would grow by four slacks (12.5 %) and 20 intervals would
+// see 17 hellos.
+TEST_F(routing_sim, late_quarter_ticks_do_not_stretch_the_hello_interval) {
+  topology t{2, {{{0, 1}, "ethernet"}}};
+  auto net = build(t);
+  auto interval = caf::timespan{net.at(0).cfg.hello_interval};
+  auto late = lax_slack(interval / 4);
+  ASSERT_GT(late, interval / 40);
+  auto before = net.stats(0).tx_hellos;
+  fire_timers_late(net, 20 * interval + late, late);
+  EXPECT_EQ(net.stats(0).tx_hellos - before, 20u);
+  EXPECT_TRUE(net.route(0, id_of(1)));
+}
+
+// Between hellos the tick runs only when something is due (a neighbour
+// about to be lost, a route about to expire, the address allocator): an
+// idle module with a live neighbour ticks once or twice per hello
+// interval, not four times. (Here the second: both modules say hello at
+// the same instant, so at its hello tick a module still has the
+// neighbour's hello of an interval ago, which would expire before its next
+// hello; the check a quarter later finds it refreshed.)
+TEST_F(routing_sim, an_idle_module_ticks_about_once_per_hello_interval) {
+  topology t{2, {{{0, 1}, "ethernet"}}};
+  auto net = build(t);
+  net.advance(3s); // addresses claimed, routes learned
+  auto interval = caf::timespan{net.at(0).cfg.hello_interval};
+  auto before = net.stats(0).tx_hellos;
+  auto fired = fire_timers_late(net, 20 * interval, caf::timespan{0});
+  EXPECT_EQ(net.stats(0).tx_hellos - before, 20u);
+  // Two modules, 20 intervals: 40 hello ticks and at most 40 checks
+  // between them; quarter ticks would be 160.
+  EXPECT_LE(fired, 80u);
+  EXPECT_TRUE(net.route(0, id_of(1)));
 }
 
 // A module that leaves cleanly says goodbye: its neighbours drop it and the
