@@ -83,10 +83,14 @@ void schedule_tick(asl_impl self, std::chrono::milliseconds period) {
   st.tick_fast = period <= st.cfg.tick;
   // Lax: on a busy loop the tick rides on a wake the traffic makes. Nothing
   // fine-grained waits on the slow tick (needs_fast_tick), so it may come
-  // up to half its period late: on an idle module it then runs on a wake
-  // the routing agent's quarter tick or a neighbour's hello makes instead
-  // of waking the loop itself.
-  auto slack = st.tick_fast ? lax_slack(period) : caf::timespan{period / 2};
+  // up to half its period late, at most 250 ms (what subscription renewals
+  // and unreachable_grace can spare): on an idle module it then runs on a
+  // wake the routing agent's tick or a neighbour's hello makes instead of
+  // waking the loop itself.
+  auto slack = st.tick_fast
+                 ? lax_slack(period)
+                 : std::min(caf::timespan{period} / 2,
+                            caf::timespan{std::chrono::milliseconds{250}});
   auto t = self->clock().now() + period;
   // The latest time it comes: what slow_tick_too_late must assume.
   st.tick_at = t + slack;

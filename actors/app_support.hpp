@@ -371,8 +371,9 @@ struct app_support_config {
   /// `tick` at once; a plain request does so only when the slow tick would
   /// come less than one `tick` before its deadline (otherwise the slow
   /// tick brings the fine one itself). Never below `tick`. On the loop
-  /// scheduler it is a lax timer that may come up to half of it late,
-  /// riding on a wake something else makes (channels/lax_timer.hpp).
+  /// scheduler it is a lax timer that may come up to half of it (at most
+  /// 250 ms) late, riding on a wake something else makes
+  /// (channels/lax_timer.hpp).
   std::chrono::milliseconds idle_tick{500};
   /// A request still unanswered after this fails with ec::timeout (the
   /// requester's own `request(..., timeout)` may end it sooner).

@@ -72,13 +72,12 @@ struct agent_state {
   uint32_t ticks = 0;
   /// The housekeeping tick (routing_agent.cpp, "timer"): when the next
   /// hello is due, when the tick on its way is due, and its generation
-  /// (a tick brought forward supersedes the one on its way). Hellos are
+  /// (only the latest counts). Hellos are
   /// due an interval after the last one was due, not after it went out,
   /// so ticks that fire late (lax) do not stretch the hello interval.
   caf::actor_clock::time_point next_hello{};
   caf::actor_clock::time_point next_tick{};
   uint64_t tick_generation = 0;
-  bool in_tick = false;
   /// Said goodbye: sends no more hellos.
   bool leaving = false;
   /// Where the other holder of our static id was last reported heard.

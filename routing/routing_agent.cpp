@@ -260,8 +260,6 @@ void on_dispute(agent_impl self, const address_allocator::dispute& d,
                           + "): not joining; a static id must be unique"));
 }
 
-void tick_for_allocator(agent_impl self);
-
 void act(agent_impl self, address_allocator::actions acts,
          const std::string& where = "") {
   auto& st = self->state;
@@ -295,7 +293,6 @@ void act(agent_impl self, address_allocator::actions acts,
     send_update(self, {st.table.self()});
     publish_fast_routes(self);
   }
-  tick_for_allocator(self);
 }
 
 // -- data packets ---------------------------------------------------------------
@@ -605,14 +602,24 @@ void on_packet(agent_impl self, packet_received& pkt) {
 // at the next hello: at every hello (hellos, periodic updates and
 // announcements), and between hellos only at the first grid point at or
 // after something expires (a neighbour, a route, a seqno request) or the
-// address allocator must act. So an idle module ticks about once per hello
-// interval instead of four times, and a silently failed link is still
+// address allocator must act. So an idle module ticks once or twice per
+// hello interval instead of four times, and a silently failed link is still
 // noticed within a quarter interval of its neighbour's expiry.
+//
+// Nothing that happens between ticks makes something due before the tick
+// on its way: a new neighbour expires hello_loss (at least 1) intervals
+// after its hello, a route its hold (at least an interval) after its
+// update, a seqno request an interval after it was sent, and the address
+// allocator acts a claim interval (the hello interval) after it claimed;
+// the tick on its way is due at the next hello at the latest, less than an
+// interval away.
 
 using agent_time = caf::actor_clock::time_point;
 
 caf::timespan quarter_of(const agent_state& st) {
-  return caf::timespan{st.cfg.hello_interval / 4};
+  // At least 1 ms: hello intervals below 4 ms reach here through the API.
+  return std::max(caf::timespan{st.cfg.hello_interval} / 4,
+                  caf::timespan{std::chrono::milliseconds{1}});
 }
 
 /// The first point of the tick grid at or after `t`; the next hello when
@@ -643,34 +650,21 @@ void schedule_tick(agent_impl self, agent_time due) {
               ++st.tick_generation);
 }
 
-/// Brings the tick forward when the address allocator must act before it
-/// (a claim started between ticks).
-void tick_for_allocator(agent_impl self) {
-  auto& st = self->state;
-  if (st.in_tick || st.tick_generation == 0)
-    return;
-  auto due = st.alloc->next_deadline();
-  if (!due)
-    return;
-  auto t = grid_point_from(st, std::max(*due, self->clock().now()));
-  if (t < st.next_tick)
-    schedule_tick(self, t);
-}
-
 /// Liveness, expiry and addressing; at a hello also hellos, periodic
 /// updates and announcements.
 void tick(agent_impl self) {
   auto& st = self->state;
-  st.in_tick = true;
   auto now = self->clock().now();
+  bool first = st.tick_generation == 1;
   // When this tick was due: its grid point (the first tick: now).
-  auto due = st.tick_generation > 1 ? st.next_tick : now;
-  bool hello_due = due >= st.next_hello;
+  auto due = first ? now : st.next_tick;
+  // A check between hellos that fired after the next hello says it too.
+  bool hello_due = first || now >= st.next_hello;
   if (hello_due) {
     // An interval after the last one was due; late by a whole interval
     // (or the first), the grid starts afresh.
     st.next_hello += st.cfg.hello_interval;
-    if (st.next_hello <= now)
+    if (first || st.next_hello <= now)
       st.next_hello = now + st.cfg.hello_interval;
   }
   if (hello_due && !st.leaving)
@@ -699,8 +693,11 @@ void tick(agent_impl self) {
   change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
                        change.changed.end());
   apply_change(self, change);
+  // The allocator acts as at its deadline or this tick's grid point, so
+  // that its next deadline, a claim interval later, falls on the grid too
+  // (ticks fire a little late on the loop scheduler).
   if (auto deadline = st.alloc->next_deadline(); deadline && *deadline <= now)
-    act(self, st.alloc->tick(now));
+    act(self, st.alloc->tick(std::max(*deadline, std::min(due, now))));
   if (hello_due) {
     if (++st.ticks % st.cfg.update_every == 0)
       send_update(self, st.table.destinations());
@@ -719,7 +716,6 @@ void tick(agent_impl self) {
   schedule_tick(self, deadline ? grid_point_from(st, std::max(*deadline,
                                                               due + caf::timespan{1}))
                                : st.next_hello);
-  st.in_tick = false;
 }
 
 // -- requests from above --------------------------------------------------------

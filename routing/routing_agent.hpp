@@ -356,8 +356,8 @@ struct routing_config {
   /// Static id, or no_module for dynamic addressing.
   module_id id = no_module;
   /// Hello interval. A neighbour is lost when no hello arrived for
-  /// `hello_loss` intervals (checked every quarter interval), or at once when
-  /// its channel ends. The default 1.5 (the first missed hello plus half an
+  /// `hello_loss` intervals (checked at the first quarter interval after
+  /// that), or at once when its channel ends. The default 1.5 (the first missed hello plus half an
   /// interval of margin for jitter) moves traffic off a silently failed link
   /// within 1.75 intervals; raise it on lossy links, where one lost hello
   /// would otherwise drop a neighbour.

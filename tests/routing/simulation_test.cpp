@@ -568,6 +568,44 @@ TEST_F(routing_sim, an_idle_module_ticks_at_most_twice_per_hello_interval) {
   EXPECT_TRUE(net.route(0, id_of(1)));
 }
 
+// The tick runs only at hellos and deadlines now, yet a silently failed
+// link is still noticed within 1.75 hello intervals of the last hello (plus
+// the tick's slack), whenever in the interval it fails and with every timer
+// firing its slack late. The route through the link goes with it.
+TEST_F(routing_sim, a_silent_neighbour_is_lost_within_1_75_intervals_with_late_ticks) {
+  topology t{2, {{{0, 1}, "ethernet"}}};
+  auto net = build(t);
+  auto interval = caf::timespan{net.at(0).cfg.hello_interval};
+  auto late = lax_slack(interval / 4);
+  auto step = interval / 40;
+  /// Fires timers late, a step at a time, until the route from module 0 to
+  /// module 1 is `up` or `most` passed; returns how long it took.
+  auto until_route = [&](bool up, caf::timespan most) {
+    caf::timespan waited{0};
+    while (net.route(0, id_of(1)).has_value() != up && waited < most) {
+      fire_timers_late(net, step, late);
+      waited += step;
+    }
+    return waited;
+  };
+  fire_timers_late(net, 3 * interval, late);
+  // Failing k/8 of an interval after the route came back: k = 0..7 covers
+  // every eighth of the hello interval (the route comes back in steps).
+  for (int k = 0; k < 8; ++k) {
+    SCOPED_TRACE("failure " + std::to_string(k));
+    ASSERT_TRUE(net.route(0, id_of(1)));
+    fire_timers_late(net, interval + interval * k / 8, late);
+    net.silence(0);
+    auto waited = until_route(false, 3 * interval);
+    // The loss follows the last hello, which came before the failure, by
+    // at most 1.75 intervals plus the tick's slack.
+    EXPECT_FALSE(net.route(0, id_of(1)));
+    EXPECT_LE(waited, interval * 7 / 4 + late + step);
+    net.restore(0);
+    until_route(true, 10 * interval);
+  }
+}
+
 // A module that leaves cleanly says goodbye: its neighbours drop it and the
 // modules beyond them lose their routes to it at once, in zero simulated
 // time, instead of after 1.5 silent hello intervals.
