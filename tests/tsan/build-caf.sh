@@ -33,7 +33,7 @@ tarball=actor-framework_0.17.6.orig.tar.gz
 sha256=e2bf5bd243f08bb7d8adde197cfe3e6d71314ed3378fe0692f8932f4c3b3928c
 url=${HERM_CAF_URL:-http://deb.debian.org/debian/pool/main/a/actor-framework/$tarball}
 
-if [ -f "$prefix/lib/libcaf_core.so" ] && [ -f "$prefix/.herm-tsan-$sha256" ]; then
+if [ -f "$prefix/lib/libcaf_core.so" ] && [ -f "$prefix/.herm-tsan-g1-$sha256" ]; then
   echo "build-caf.sh: $prefix already holds CAF 0.17.6 built with TSan"
   exit 0
 fi
@@ -65,9 +65,12 @@ if [ ! -f actor-framework-0.17.6/.herm-patched ]; then
   touch actor-framework-0.17.6/.herm-patched
 fi
 
-flags="-fsanitize=thread -fno-omit-frame-pointer -g -O1"
+# -O2 with line tables only (-g1): a report names file and line of every
+# frame, and the build takes a third less time than with full debug info.
+flags="-fsanitize=thread -fno-omit-frame-pointer"
 cmake -S actor-framework-0.17.6 -B build -G Ninja \
   -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG" \
   -DCMAKE_CXX_FLAGS="-std=c++11 -Wall -Wextra $flags" \
   -DCMAKE_EXE_LINKER_FLAGS=-fsanitize=thread \
   -DCMAKE_SHARED_LINKER_FLAGS=-fsanitize=thread \
@@ -78,5 +81,5 @@ cmake -S actor-framework-0.17.6 -B build -G Ninja \
   > "$prefix/cmake.log"
 cmake --build build -j"$jobs"
 cmake --install build > /dev/null
-touch "$prefix/.herm-tsan-$sha256"
+touch "$prefix/.herm-tsan-g1-$sha256"
 echo "build-caf.sh: CAF 0.17.6 with TSan installed in $prefix"

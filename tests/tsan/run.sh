@@ -12,8 +12,8 @@
 #    TSAN_OPTIONS with tests/tsan/tsan.supp; a report makes its process exit
 #    with 66, so the test fails.
 #
-# Not part of .ci/run (the instrumented CAF alone takes a quarter of CI's
-# budget); docs/reliability.md, "Sanitizers", has the latest results.
+# .ci/run runs it on every submission; docs/reliability.md, "Sanitizers",
+# has the latest results.
 
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/../.." && pwd)
