@@ -525,10 +525,17 @@ caf::expected<byte_buffer> marshal(caf::actor_system& sys,
   // Its storage usually comes back to the cache once the message that
   // carries it is sent (app_support.cpp, recycle_payload). A payload may
   // also be kept (a parked reliable request, a topic's last value): then
-  // it holds no more than it grew to or 512 bytes.
-  auto out = take_buffer(128, 512);
+  // it holds no more than it grew to, 512 bytes, or twice the payload this
+  // thread marshalled last. That last size is the first guess: a stream of
+  // 1,400-byte payloads takes a kept buffer that fits at once instead of
+  // growing one of 512 bytes by doubling (about four allocations a
+  // message; docs/performance.md, allocations).
+  thread_local size_t last_size = 0;
+  auto out = take_buffer(std::max<size_t>(128, last_size),
+                         std::max<size_t>(512, 2 * last_size));
   if (auto err = marshal_to(sys, msg, out))
     return err;
+  last_size = out.size();
   return out;
 }
 

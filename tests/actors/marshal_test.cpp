@@ -2,6 +2,7 @@
 // (docs/protocol.md (APO payloads), "## APO payloads").
 
 #include "actors/marshal.hpp"
+#include "channels/thread_cache.hpp"
 
 #include <atomic>
 #include <chrono>
@@ -346,6 +347,34 @@ TEST_F(marshal_test, round_trips_messages_of_more_values_than_it_keeps_in_place)
   EXPECT_EQ(back.type_token(),
             (caf::make_type_token<uint8_t, std::string, double, int32_t,
                                   std::string, bool>()));
+}
+
+// A stream of payloads larger than marshal's first guess of 512 bytes:
+// the second takes the buffer the first grew to back from the thread's
+// cache and does not grow it. (Before, each started from at most 512 bytes
+// and doubled its way to 2 KiB, about four allocations a message.)
+TEST_F(marshal_test, a_payload_the_size_of_the_last_takes_a_kept_buffer_that_fits) {
+  while (herm::this_thread_buffer_cache().held > 0)
+    (void) herm::take_buffer(1, herm::buffer_cache_limits::max_capacity);
+  auto msg = caf::make_message(std::string(1400, 'x'));
+  auto first = herm::marshal(sys(), msg);
+  ASSERT_TRUE(first);
+  auto size = first->size();
+  auto capacity = first->capacity();
+  herm::recycle_buffer(std::move(*first));
+  auto before = herm::this_thread_buffer_cache();
+  auto second = herm::marshal(sys(), msg);
+  ASSERT_TRUE(second);
+  EXPECT_EQ(second->size(), size);
+  EXPECT_EQ(herm::this_thread_buffer_cache().allocated, before.allocated);
+  EXPECT_EQ(herm::this_thread_buffer_cache().reused, before.reused + 1);
+  EXPECT_EQ(second->capacity(), capacity) << "the kept buffer grew";
+  // A small payload next does not take a large buffer it would keep: at
+  // most twice what the last one needed.
+  herm::recycle_buffer(std::move(*second));
+  auto small = herm::marshal(sys(), caf::make_message(int32_t{7}));
+  ASSERT_TRUE(small);
+  EXPECT_LE(small->capacity(), std::max<size_t>(512, 2 * size));
 }
 
 TEST_F(marshal_test, round_trips_a_user_type_with_only_inspect_and_a_type_id) {
