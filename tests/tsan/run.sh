@@ -4,7 +4,7 @@
 #   tests/tsan/run.sh [CTEST_ARGS...]     e.g. tests/tsan/run.sh -R hotplug
 #
 # 1. tests/tsan/build-caf.sh builds CAF 0.17.6 with -fsanitize=thread into
-#    build-caf-tsan (once; about 15 minutes on 2 cores);
+#    build-caf-tsan (once; about 3 minutes on 2 cores);
 # 2. configures build-tsan with -DHERM_TSAN=ON -DHERM_CAF_ROOT=build-caf-tsan
 #    and builds it;
 # 3. runs ctest there (without the 1,000-module simulation and the qemu
@@ -33,8 +33,9 @@ cmake --build build-tsan -j"$jobs"
 # Also left out: the deterministic single-threaded simulations (routing
 # over 100-module topologies, fragmentation under random traffic). They
 # start no thread, so ThreadSanitizer has nothing to watch in them, and
-# its slowdown made them 3 of its 4 longest tests (mesh100 49 s, grid100
-# 38 s, random traffic 63 s in all); the default and ASan builds run them.
+# under its slowdown they took about 180 s of test time, the two longest
+# tests among them (mesh100 49 s, grid100 38 s); the default and ASan
+# builds run them.
 if [ $# -eq 0 ]; then
   set -- -E 'large|can_real_kernel|gateway_process_test|routing_topologies|random_traffic'
 fi
