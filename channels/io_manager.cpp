@@ -159,7 +159,7 @@ void open_channel(io_impl self, channel_id id, std::optional<open_promise> rp) {
         if (rp)
           rp->deliver(std::move(ch), std::move(info));
       },
-      [self, id, rp, fail](caf::error& err) mutable { fail(std::move(err), rp); });
+      [rp, fail](caf::error& err) mutable { fail(std::move(err), rp); });
 }
 
 io_manager_actor::behavior_type io_manager_fun(io_impl self,

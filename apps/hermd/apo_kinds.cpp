@@ -155,7 +155,7 @@ void ensure_bound(Self* self, binding<T>& b, const app_support_actor& apps,
   self->request(apps, 5s, atom::bind_v,
                 bind_request{query_by::name, target, 1000, true})
     .then(
-      [self, &b, target, flush](caf::actor& proxy) {
+      [&b, target, flush](caf::actor& proxy) {
         b.pending = false;
         b.proxy = proxy;
         spdlog::info("bound to APO '{}'", target);
