@@ -3,7 +3,8 @@
 // The Application Support Layer's actor: adapts messages and timers to the
 // pure cores (APO registry, bindings, outgoing requests, reliable mode,
 // request server, discoveries, topics, reachability: asl_state.hpp) and
-// sends what they decide. Local publications are in asl_topics.cpp.
+// sends what they decide. Local publications are in asl_topics.cpp,
+// bindings and discoveries in asl_bindings.cpp.
 
 #include <algorithm>
 #include <random>
@@ -165,7 +166,8 @@ void transmit(asl_impl self, module_id dst, asl_message msg,
   recycle_payload(msg);
 }
 
-/// app_ec::unavailable once the routing agent stopped, else none.
+} // namespace
+
 caf::error agent_gone(asl_impl self) {
   auto& st = self->state;
   if (!st.agent_down)
@@ -173,7 +175,6 @@ caf::error agent_gone(asl_impl self) {
   return asl_error::agent_stopped(st.self_id, st.agent_down);
 }
 
-} // namespace
 
 void post(asl_impl self, const caf::strong_actor_ptr& dst,
           caf::strong_actor_ptr from, caf::message_id mid, caf::message msg) {
@@ -185,13 +186,12 @@ void post(asl_impl self, const caf::strong_actor_ptr& dst,
                self->context());
 }
 
-namespace {
-
-/// Answers waiting request `out` with `err` (and `out` is done).
 void fail(asl_impl self, const outgoing& out, const caf::error& err) {
   post(self, out.sender, nullptr, out.mid.response_id(),
        caf::make_message(err));
 }
+
+namespace {
 
 /// Answers a request with an error (one-way messages have nobody to tell).
 void refuse(asl_impl self, const caf::strong_actor_ptr& sender,
@@ -230,91 +230,6 @@ caf::expected<caf::message> for_local_apo(asl_impl self, caf::message msg) {
   if (!msg.match_elements<raw_payload>())
     return msg;
   return unmarshal_counted(self, msg.get_as<raw_payload>(0).bytes);
-}
-
-// -- bindings ------------------------------------------------------------------------
-
-/// Fails every request waiting on binding `id` (or, with id 0, on module
-/// `dst`).
-void fail_pending(asl_impl self, uint32_t id, module_id dst,
-                  const caf::error& err, bool keep_reliable = false) {
-  for (auto& out : self->state.pending->take_waiting_on(id, dst, keep_reliable))
-    fail(self, out, err);
-}
-
-/// The target of binding `id` is gone for `reason` (the remote exit reason,
-/// or why it is unreachable). A rebinding proxy waits for a new target; any
-/// other ends, and its monitors learn `reason`.
-void lose_target(asl_impl self, uint32_t id, const caf::error& reason,
-                 const caf::error& request_error) {
-  auto& st = self->state;
-  auto b = st.bindings.find(id);
-  if (b == nullptr)
-    return;
-  // Reliable requests of a rebinding proxy wait for its next target (or
-  // their deadline).
-  fail_pending(self, id, no_module, request_error, b->rebind);
-  if (auto proxy = st.bindings.lose(id, self->clock().now()))
-    if (detail::kill_apo_proxy(proxy, reason, self->context()))
-      ++st.stats.proxies_ended;
-}
-
-/// Points binding `b` at `ref`.
-void bind_to(asl_impl self, binding& b, const apo_ref& ref) {
-  binding_table::bind(b, ref, self->state.self_id, self->clock().now(),
-                      self->state.out);
-  flush(self);
-}
-
-/// A new proxy bound to `ref` (rebinding as `req` says, if given).
-caf::actor make_binding(asl_impl self, const apo_ref& ref, bool reliable,
-                        bool sign, const bind_request* req = nullptr) {
-  auto& st = self->state;
-  auto [id, b] = st.bindings.add(self->clock().now());
-  auto proxy = detail::make_apo_proxy(self->system(),
-                                      caf::actor_cast<caf::actor>(self), id);
-  b.proxy = caf::actor_cast<caf::weak_actor_ptr>(proxy);
-  b.reliable = reliable;
-  b.sign = sign;
-  if (req != nullptr) {
-    b.rebind = req->rebind;
-    b.by = req->by;
-    b.pattern = req->pattern;
-  }
-  bind_to(self, b, ref);
-  return proxy;
-}
-
-// -- discovery ---------------------------------------------------------------------
-
-void finish_discovery(asl_impl self, uint32_t qid) {
-  auto& st = self->state;
-  if (auto d = st.discoveries->finish(qid, st.self_id))
-    d->finish(std::move(d->found));
-}
-
-/// Why a discovery of `pattern` cannot start (the routing agent stopped,
-/// a bad pattern); none if it can.
-caf::error cannot_discover(asl_impl self, query_by by,
-                           const std::string& pattern) {
-  if (auto err = agent_gone(self))
-    return err;
-  if (by != query_by::any)
-    return asl_error::check_label("a pattern", pattern);
-  return caf::none;
-}
-
-void discover(asl_impl self, apo_query q, discovery_table::callback finish) {
-  auto& st = self->state;
-  auto timeout = std::chrono::milliseconds(q.timeout_ms);
-  auto qid = st.discoveries->start(std::move(q), st.self_id,
-                                   std::move(finish), st.out);
-  if (st.discoveries->satisfied(qid)) {
-    finish_discovery(self, qid);
-    return;
-  }
-  flush(self);
-  self->delayed_send(self, timeout, atom::done_v, qid);
 }
 
 // -- requests: the sender ------------------------------------------------------------

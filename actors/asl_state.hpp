@@ -108,6 +108,43 @@ inline caf::error check_raw(const byte_buffer& bytes) {
 caf::expected<caf::message> unmarshal_counted(asl_impl self,
                                               const byte_buffer& payload);
 
+/// Answers waiting request `out` with `err` (and `out` is done).
+void fail(asl_impl self, const outgoing& out, const caf::error& err);
+
+/// app_ec::unavailable once the routing agent stopped, else none.
+caf::error agent_gone(asl_impl self);
+
+// -- bindings and discovery (asl_bindings.cpp) -------------------------------------
+
+/// Fails every request waiting on binding `id` (or, with id 0, on module
+/// `dst`); with `keep_reliable`, reliable requests keep waiting.
+void fail_pending(asl_impl self, uint32_t id, module_id dst,
+                  const caf::error& err, bool keep_reliable = false);
+
+/// The target of binding `id` is gone for `reason` (the remote exit reason,
+/// or why it is unreachable). A rebinding proxy waits for a new target; any
+/// other ends, and its monitors learn `reason`. Its waiting requests fail
+/// with `request_error` (a rebinding proxy's reliable ones wait).
+void lose_target(asl_impl self, uint32_t id, const caf::error& reason,
+                 const caf::error& request_error);
+
+/// A new proxy bound to `ref` (rebinding as `req` says, if given).
+caf::actor make_binding(asl_impl self, const apo_ref& ref, bool reliable,
+                        bool sign, const bind_request* req = nullptr);
+
+/// Ends discovery `qid`: its callback gets what was found.
+void finish_discovery(asl_impl self, uint32_t qid);
+
+/// Why a discovery of `pattern` cannot start (the routing agent stopped,
+/// a bad pattern); none if it can.
+caf::error cannot_discover(asl_impl self, query_by by,
+                           const std::string& pattern);
+
+/// Starts discovery `q`: the query goes out, and `finish` gets the APOs
+/// found when enough answered or at its timeout (at once when the local
+/// table already satisfies it).
+void discover(asl_impl self, apo_query q, discovery_table::callback finish);
+
 // -- topics (asl_topics.cpp) -------------------------------------------------------
 
 /// Gives a value of topic `t` (named `name`, from `publisher`, its `seq`)

@@ -70,7 +70,7 @@ struct agent_state {
   uint16_t hello_seqno = 0;
   /// Hello intervals since start.
   uint32_t ticks = 0;
-  /// The housekeeping tick (routing_agent.cpp, "timer"): when the next
+  /// The housekeeping tick (agent_tick.cpp): when the next
   /// hello is due, when the tick on its way is due, and its generation
   /// (only the latest counts). Hellos are
   /// due an interval after the last one was due, not after it went out,
@@ -192,6 +192,33 @@ void send_all(agent_impl self, const byte_buffer& bytes, channel_id except = 0,
 /// This module's next hello, encoded into the scratch buffer; a goodbye
 /// (interval 0) when `leaving`.
 const byte_buffer& make_hello(agent_impl self, bool leaving);
+
+/// Hellos on every channel; a goodbye (interval 0) when `leaving`.
+void send_hellos(agent_impl self, bool leaving = false);
+
+/// Advertises `dests` on every channel (or only `only` when not 0).
+void send_update(agent_impl self, const std::vector<module_id>& dests,
+                 channel_id only = 0);
+
+// -- route changes and addressing (routing_agent.cpp) ----------------------------
+
+/// Collects what changed; a flush message queued behind the messages being
+/// processed sends one triggered update for the whole burst (a cold start
+/// or a failure changes many destinations through many updates at once),
+/// and one route event per destination changed. O(|change| log N).
+void apply_change(agent_impl self, const table_change& change);
+
+/// Carries out what the address allocator decided: a dispute over our id,
+/// the claims and conflicts to send, an id newly ours (advertised at once);
+/// `where` says where the packet that led to it was heard, for the log.
+void act(agent_impl self, address_allocator::actions acts,
+         const std::string& where = "");
+
+// -- the housekeeping tick (agent_tick.cpp) --------------------------------------
+
+/// Liveness, expiry and addressing; at a hello also hellos, periodic
+/// updates and announcements; then sends itself the next tick.
+void tick(agent_impl self);
 
 // -- authentication (agent_auth.cpp) --------------------------------------------
 

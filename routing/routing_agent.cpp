@@ -4,7 +4,8 @@
 // table, neighbour table, flood cache, seqno requests, address allocator,
 // authenticator: agent_state.hpp) and sends what they decide. Queries and
 // route events are answered in agent_reports.cpp, authentication in
-// agent_auth.cpp, the fast path's snapshot kept in agent_fast_routes.cpp.
+// agent_auth.cpp, the fast path's snapshot kept in agent_fast_routes.cpp,
+// the housekeeping tick in agent_tick.cpp.
 
 #include <algorithm>
 #include <limits>
@@ -84,18 +85,14 @@ void report_neighbour(agent_impl self, const next_hop& nh, module_id id,
   st.cfg.on_neighbour(ev);
 }
 
-namespace {
-
-/// Hellos on every channel; a goodbye (interval 0) when `leaving`.
-void send_hellos(agent_impl self, bool leaving = false) {
+void send_hellos(agent_impl self, bool leaving) {
   auto& st = self->state;
   send_all(self, make_hello(self, leaving));
   st.stats.tx_hellos += st.channels.size();
 }
 
-/// Advertises `dests` on every channel (or only `only` when not 0).
 void send_update(agent_impl self, const std::vector<module_id>& dests,
-                 channel_id only = 0) {
+                 channel_id only) {
   auto& st = self->state;
   if (st.channels.empty())
     return;
@@ -124,6 +121,8 @@ void send_update(agent_impl self, const std::vector<module_id>& dests,
   }
   flush();
 }
+
+namespace {
 
 /// Floods a seqno request for each of `dests` that seqno_requests lets
 /// through (one per destination per hello interval, a bounded number).
@@ -177,12 +176,10 @@ void relay_flood(agent_impl self, T fwd, channel_id in) {
   send_all(self, encoded(self, fwd), relay_except(self, in));
 }
 
+} // namespace
+
 // -- route changes --------------------------------------------------------------
 
-/// Collects what changed; a flush message queued behind the messages being
-/// processed sends one triggered update for the whole burst (a cold start
-/// or a failure changes many destinations through many updates at once),
-/// and one route event per destination changed. O(|change| log N).
 void apply_change(agent_impl self, const table_change& change) {
   auto& st = self->state;
   // The snapshot follows at once: a packet must not leave on a next hop
@@ -203,6 +200,8 @@ void apply_change(agent_impl self, const table_change& change) {
     self->send(self, atom::flush_v);
   }
 }
+
+namespace {
 
 /// Takes the contents of a pending set, leaving it empty.
 std::vector<module_id> take(std::set<module_id>& pending) {
@@ -260,8 +259,10 @@ void on_dispute(agent_impl self, const address_allocator::dispute& d,
                           + "): not joining; a static id must be unique"));
 }
 
+} // namespace
+
 void act(agent_impl self, address_allocator::actions acts,
-         const std::string& where = "") {
+         const std::string& where) {
   auto& st = self->state;
   if (acts.disputed)
     on_dispute(self, *acts.disputed, where);
@@ -294,6 +295,8 @@ void act(agent_impl self, address_allocator::actions acts,
     publish_fast_routes(self);
   }
 }
+
+namespace {
 
 // -- data packets ---------------------------------------------------------------
 
@@ -604,128 +607,6 @@ void on_packet(agent_impl self, packet_received& pkt) {
       ++st.stats.rx_auth_failed;
       break;
   }
-}
-
-// -- timer ----------------------------------------------------------------------
-
-// The housekeeping tick runs on a grid of quarter hello intervals that ends
-// at the next hello: at every hello (hellos, periodic updates and
-// announcements), and between hellos only at the first grid point at or
-// after something expires (a neighbour, a route, a seqno request) or the
-// address allocator must act. So an idle module ticks once or twice per
-// hello interval instead of four times, and a silently failed link is still
-// noticed within a quarter interval of its neighbour's expiry.
-//
-// Nothing that happens between ticks makes something due before the tick
-// on its way: a new neighbour expires hello_loss (at least 1) intervals
-// after its hello, a route its hold (at least an interval) after its
-// update, a seqno request an interval after it was sent, and the address
-// allocator acts a claim interval (the hello interval) after it claimed;
-// the tick on its way is due at the next hello at the latest, less than an
-// interval away.
-
-using agent_time = caf::actor_clock::time_point;
-
-caf::timespan quarter_of(const agent_state& st) {
-  // At least 1 ms: hello intervals below 4 ms reach here through the API.
-  return std::max(caf::timespan{st.cfg.hello_interval} / 4,
-                  caf::timespan{std::chrono::milliseconds{1}});
-}
-
-/// The first point of the tick grid at or after `t`; the next hello when
-/// `t` is after it.
-agent_time grid_point_from(const agent_state& st, agent_time t) {
-  if (t >= st.next_hello)
-    return st.next_hello;
-  return st.next_hello - ((st.next_hello - t) / quarter_of(st)) * quarter_of(st);
-}
-
-/// The earliest time something the tick handles falls due, if anything.
-std::optional<agent_time> next_deadline(const agent_state& st) {
-  std::optional<agent_time> first;
-  for (auto t : {st.neighbours.next_expiry(), st.requested.next_expiry(),
-                 st.table.next_expiry(), st.alloc->next_deadline()})
-    if (t && (!first || *t < *first))
-      first = t;
-  return first;
-}
-
-/// Sends the next tick, due at `due`; one already on its way no longer
-/// counts.
-void schedule_tick(agent_impl self, agent_time due) {
-  auto& st = self->state;
-  st.next_tick = due;
-  // Lax: on a busy loop the tick rides on a wake the traffic makes.
-  send_lax_at(self, due, lax_slack(quarter_of(st)), atom::tick_v,
-              ++st.tick_generation);
-}
-
-/// Liveness, expiry and addressing; at a hello also hellos, periodic
-/// updates and announcements.
-void tick(agent_impl self) {
-  auto& st = self->state;
-  auto now = self->clock().now();
-  bool first = st.tick_generation == 1;
-  // When this tick was due: its grid point (the first tick: now).
-  auto due = first ? now : st.next_tick;
-  // A check between hellos that fired after the next hello says it too.
-  bool hello_due = first || now >= st.next_hello;
-  if (hello_due) {
-    // An interval after the last one was due; late by a whole interval
-    // (or the first), the grid starts afresh.
-    st.next_hello += st.cfg.hello_interval;
-    if (first || st.next_hello <= now)
-      st.next_hello = now + st.cfg.hello_interval;
-  }
-  if (hello_due && !st.leaving)
-    send_hellos(self);
-  // Neighbours silent for too long are gone.
-  table_change change;
-  std::vector<neighbour_table::neighbour> was;
-  auto lost = st.neighbours.expire(now, st.cfg.on_neighbour ? &was : nullptr);
-  for (size_t i = 0; i < lost.size(); ++i) {
-    auto& nh = lost[i];
-    if (i < was.size())
-      report_neighbour(self, nh, was[i].id, was[i].instance, false,
-                       "hellos lost");
-    auto c = st.table.remove_neighbour(nh);
-    change.changed.insert(change.changed.end(), c.changed.begin(),
-                          c.changed.end());
-  }
-  // Seqno requests older than an interval no longer hold back new ones.
-  st.requested.expire(now);
-  auto expired = st.table.expire(now);
-  change.changed.insert(change.changed.end(), expired.changed.begin(),
-                        expired.changed.end());
-  change.starving.insert(change.starving.end(), expired.starving.begin(),
-                         expired.starving.end());
-  std::sort(change.changed.begin(), change.changed.end());
-  change.changed.erase(std::unique(change.changed.begin(), change.changed.end()),
-                       change.changed.end());
-  apply_change(self, change);
-  // The allocator acts as at its deadline or this tick's grid point, so
-  // that its next deadline, a claim interval later, falls on the grid too
-  // (ticks fire a little late on the loop scheduler).
-  if (auto deadline = st.alloc->next_deadline(); deadline && *deadline <= now)
-    act(self, st.alloc->tick(std::max(*deadline, std::min(due, now))));
-  if (hello_due) {
-    if (++st.ticks % st.cfg.update_every == 0)
-      send_update(self, st.table.destinations());
-    if (st.alloc->assigned() && st.ticks % st.cfg.announce_every == 0) {
-      // An announcement is a claim whose nonce is the claimant's instance
-      // (a fresh claim's nonce is random): receivers treat it as "this id
-      // is in use by that instance" and apply the merge rule (a static
-      // id's holder names itself holder: address_allocator.hpp).
-      claim announce{st.alloc->id(), st.alloc->instance(),
-                     st.alloc->instance(), default_hop_limit};
-      send_all(self, encoded(self, announce));
-      ++st.stats.tx_claims;
-    }
-  }
-  auto deadline = next_deadline(st);
-  schedule_tick(self, deadline ? grid_point_from(st, std::max(*deadline,
-                                                              due + caf::timespan{1}))
-                               : st.next_hello);
 }
 
 // -- requests from above --------------------------------------------------------
