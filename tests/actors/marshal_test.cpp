@@ -29,6 +29,7 @@
 #include "actors/runtime/error.hpp"
 #include "actors/runtime/system.hpp"
 #include "actors/runtime/type_ids.hpp"
+#include "tests/support/replaced_new.hpp"
 
 // -- a user type: one inspect overload and one type-ID entry -------------------
 
@@ -82,32 +83,18 @@ CAF_END_TYPE_ID_BLOCK(marshal_test_unregistered)
 
 // Records the largest single allocation while armed, to show that announced
 // lengths are checked before anything is allocated for them.
-// GCC sees malloc/free behind the replaced operators and warns; they match.
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-
 namespace {
 std::atomic<bool> probe_armed{false};
 std::atomic<size_t> probe_largest{0};
 } // namespace
 
-void* operator new(size_t n) {
-  if (probe_armed.load(std::memory_order_relaxed)) {
-    auto prev = probe_largest.load(std::memory_order_relaxed);
-    while (n > prev && !probe_largest.compare_exchange_weak(prev, n)) {
-      // retry
-    }
+void herm::test::on_allocation(std::size_t n) noexcept {
+  if (!probe_armed.load(std::memory_order_relaxed))
+    return;
+  auto prev = probe_largest.load(std::memory_order_relaxed);
+  while (n > prev && !probe_largest.compare_exchange_weak(prev, n)) {
+    // retry
   }
-  if (auto p = std::malloc(n == 0 ? 1 : n))
-    return p;
-  throw std::bad_alloc{};
-}
-
-void operator delete(void* p) noexcept {
-  std::free(p);
-}
-
-void operator delete(void* p, size_t) noexcept {
-  std::free(p);
 }
 
 namespace {
@@ -501,6 +488,12 @@ TEST_F(marshal_test, refuses_huge_announced_lengths_without_allocating) {
   wide.insert(wide.end(), {0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff,
                            0xff, 0x7f});
   cases.emplace_back(wide, "exceeds 64 bits");
+  // The probe sees allocations (else every bound below held vacuously).
+  probe_largest = 0;
+  probe_armed = true;
+  ::operator delete(::operator new(10000));
+  probe_armed = false;
+  ASSERT_EQ(probe_largest.load(), 10000u);
   for (auto& [bytes, what] : cases) {
     probe_largest = 0;
     probe_armed = true;

@@ -21,6 +21,7 @@
 
 #include "channels/fragmentation.hpp"
 #include "channels/link_driver.hpp"
+#include "tests/support/replaced_new.hpp"
 
 using namespace herm;
 using namespace std::chrono_literals;
@@ -36,66 +37,10 @@ size_t allocation_count = 0;
 
 } // namespace
 
-// GCC cannot see that malloc in these operator new and free in these
-// operator delete match, and warns when it inlines them.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-
-namespace {
-
-void* counted_malloc(std::size_t size) noexcept {
+void herm::test::on_allocation(std::size_t) noexcept {
   if (counting_allocations)
     ++allocation_count;
-  return std::malloc(size == 0 ? 1 : size);
 }
-
-} // namespace
-
-// Every non-aligned form, so that no pair mixes these with the runtime's
-// (AddressSanitizer checks that they match).
-void* operator new(std::size_t size) {
-  if (auto* p = counted_malloc(size))
-    return p;
-  throw std::bad_alloc{};
-}
-
-void* operator new[](std::size_t size) {
-  return operator new(size);
-}
-
-void* operator new(std::size_t size, const std::nothrow_t&) noexcept {
-  return counted_malloc(size);
-}
-
-void* operator new[](std::size_t size, const std::nothrow_t&) noexcept {
-  return counted_malloc(size);
-}
-
-void operator delete(void* p) noexcept {
-  std::free(p);
-}
-
-void operator delete[](void* p) noexcept {
-  std::free(p);
-}
-
-void operator delete(void* p, std::size_t) noexcept {
-  std::free(p);
-}
-
-void operator delete[](void* p, std::size_t) noexcept {
-  std::free(p);
-}
-
-void operator delete(void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
-
-void operator delete[](void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
-
-#pragma GCC diagnostic pop
 
 namespace herm {
 
