@@ -464,17 +464,7 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
     report_neighbour(self, nh, h->sender, h->instance, true,
                      res == result::added ? "hello" : "restarted");
     apply_change(self, st.table.set_neighbour(nh, ci->second.cost, ci->second.code));
-    // Our hello to the new neighbour at once, then everything we know. A
-    // neighbour drops updates from a sender it has not heard a hello from
-    // (rx_unknown_neighbour); without this hello it would learn no route
-    // to us until our next hello, while we already reach it and may answer
-    // its discovery. It costs one hello per new neighbour on each side: the
-    // neighbour answers ours too if we are new to it, and its answer is a
-    // refresh here.
-    if (!st.leaving) {
-      send_on(self, ch, src, make_hello(self, false));
-      ++st.stats.tx_hellos;
-    }
+    // Tell the new neighbour everything we know at once.
     send_update(self, st.table.destinations(), ch);
   }
   if (is_unicast(h->sender))

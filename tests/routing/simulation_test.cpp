@@ -151,39 +151,6 @@ TEST_F(routing_sim, two_modules_learn_routes_to_each_other) {
   check_traffic(net, t, 10, 1);
 }
 
-// A module that joins hears nothing from its neighbour until the
-// neighbour's next hello, and drops the neighbour's "everything we know"
-// update as from a stranger. So the neighbour answers a new neighbour's
-// hello with its own at once: both have a route to each other within the
-// frame's round trip, not an interval later (with a plain request refused
-// for no route meanwhile: three sonar batches lost in avr_hermd). The
-// answer is one hello, not a ping-pong.
-TEST_F(routing_sim, a_joining_module_learns_its_neighbour_without_waiting_for_its_next_hello) {
-  sim_network net{*this, test_prefix()}; // hellos every 100 ms
-  auto a = net.add_module(id_of(0));
-  auto b = net.add_module(id_of(1));
-  net.connect({a, b}, "ethernet");
-  net.start_module(a);
-  net.advance(40ms); // a's first hello went out to nobody
-  auto a_hellos = net.stats(a).tx_hellos;
-  ASSERT_GE(a_hellos, 1u);
-  net.start_module(b);
-  net.advance(20ms); // b's first hello, 60 ms before a's next one
-  auto to_a = net.route(b, id_of(0));
-  ASSERT_TRUE(to_a) << "b has no route to a before a's next hello";
-  EXPECT_EQ(to_a->hops, 1u);
-  EXPECT_TRUE(net.route(a, id_of(1)));
-  EXPECT_EQ(net.stats(a).tx_hellos, a_hellos + 1) << "one answering hello";
-  // b took a's update too (sent after the hello): nothing from a stranger.
-  EXPECT_EQ(net.stats(b).rx_unknown_neighbour, 0u);
-  // b answers a's hello once (a is new to b); that is a refresh at a, so
-  // no further hello goes out before a's next one.
-  auto b_hellos = net.stats(b).tx_hellos;
-  net.advance(30ms);
-  EXPECT_EQ(net.stats(a).tx_hellos, a_hellos + 1);
-  EXPECT_EQ(net.stats(b).tx_hellos, b_hellos);
-}
-
 TEST_F(routing_sim, the_paper_testbed_routes_by_cost_and_size) {
   // Sensor 0x40, main controller 0x4E, vision 0x30, mobile 0x50 (Fig. 5):
   // RS232C sensor-main, IEEE 1394 vision-mobile, Ethernet mobile-main and a
