@@ -70,11 +70,11 @@ struct agent_state {
   uint16_t hello_seqno = 0;
   /// Hello intervals since start.
   uint32_t ticks = 0;
-  /// The housekeeping tick (agent_tick.cpp): when the next
-  /// hello is due, when the tick on its way is due, and its generation
-  /// (only the latest counts). Hellos are
-  /// due an interval after the last one was due, not after it went out,
-  /// so ticks that fire late (lax) do not stretch the hello interval.
+  /// The housekeeping tick (agent_tick.cpp): when the next hello is due,
+  /// when the tick on its way is due, and its generation (only the latest
+  /// counts). Hellos are due an interval after the last one was due, not
+  /// after it went out, so ticks that fire late (lax) do not stretch the
+  /// hello interval.
   caf::actor_clock::time_point next_hello{};
   caf::actor_clock::time_point next_tick{};
   uint64_t tick_generation = 0;

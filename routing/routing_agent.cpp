@@ -15,7 +15,6 @@
 
 #include "caf/actor_system.hpp"
 
-#include "channels/lax_timer.hpp"
 #include "routing/agent_state.hpp"
 #include "routing/error.hpp"
 

@@ -262,8 +262,8 @@ TEST_F(hermd_failure_test, a_module_killed_with_sigkill_comes_back_with_its_id) 
     EXPECT_EQ(p.wait(10s), 128 + SIGKILL);
   }
   child_process again{{hermd, cfg}};
-  // Either line may come first: t answers p's first hello with its own at
-  // once, so the route can be up before p says it runs.
+  // Either line may come first: the route comes with t's hello, which
+  // may arrive before p says it runs.
   ASSERT_TRUE(again.wait_for_line_containing("route to 0x22:", 10s))
     << again.output();
   auto running = [&] {

@@ -5,7 +5,8 @@ Every C and C++ source file (.hpp, .cpp, .h, .c, .def, .ipp) under
 channels/, routing/, actors/ and apps/, the benchmarks (apps/bench/)
 aside, has at most MAX_LINES lines. A file past it mixes jobs: split it by
 job, as routing/agent_tick.cpp and actors/asl_bindings.cpp were split off
-their actors' files (docs/architecture.md, "Layers").
+their actors' files (docs/architecture.md, "Type IDs and errors",
+which lists the tree's rules).
 
 usage: check_file_sizes.py SOURCE_DIR | --self-test
 Prints every file over the bound as file: N lines, and exits 1 if there is
