@@ -29,6 +29,7 @@ neighbour_table::heard(const next_hop& from, module_id id, uint64_t instance,
   } else if (i->second.instance != instance) {
     result = hello_result::restarted;
   }
+  departed_.erase(from);
   auto& n = i->second;
   n.id = id;
   n.instance = instance;
@@ -49,7 +50,35 @@ bool neighbour_table::goodbye(const next_hop& from, uint64_t instance) {
   if (i == neighbours_.end() || i->second.instance != instance)
     return false;
   erase(i);
+  auto stamp = ++next_departure_;
+  departed_[from] = departure{instance, stamp};
+  departed_order_.emplace_back(from, stamp);
+  auto current = [this](const std::pair<next_hop, uint64_t>& x) {
+    auto d = departed_.find(x.first);
+    return d != departed_.end() && d->second.stamp == x.second;
+  };
+  // Bound: forget the oldest goodbyes (entries superseded by a later
+  // goodbye or a hello are skipped on the way).
+  while (departed_.size() > limits_.total) {
+    if (current(departed_order_.front()))
+      departed_.erase(departed_order_.front().first);
+    departed_order_.pop_front();
+  }
+  // The order keeps superseded entries until they reach the front: drop
+  // them all once they are as many as the current ones (amortised O(1)).
+  if (departed_order_.size() > 2 * departed_.size() + 8)
+    departed_order_.erase(std::remove_if(departed_order_.begin(),
+                                         departed_order_.end(),
+                                         [&](const auto& x) {
+                                           return !current(x);
+                                         }),
+                          departed_order_.end());
   return true;
+}
+
+bool neighbour_table::departed(const next_hop& from, uint64_t instance) const {
+  auto d = departed_.find(from);
+  return d != departed_.end() && d->second.instance == instance;
 }
 
 void neighbour_table::remove_channel(channel_id ch) {

@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <optional>
 #include <vector>
@@ -71,8 +72,15 @@ public:
                      std::chrono::milliseconds interval, time_point now);
 
   /// A goodbye from `from`: drops it if held with that `instance` (a
-  /// goodbye of an earlier life changes nothing). True if dropped. O(log n).
+  /// goodbye of an earlier life changes nothing) and remembers that it
+  /// left (departed). True if dropped. O(log n).
   bool goodbye(const next_hop& from, uint64_t instance);
+
+  /// Whether `from` said goodbye as `instance` and has not said hello since:
+  /// what it sent before its goodbye and arrives after it must not make it
+  /// a neighbour again. Remembers the last `limits::total` goodbyes (the
+  /// oldest is forgotten first). O(log n).
+  bool departed(const next_hop& from, uint64_t instance) const;
 
   /// Drops every neighbour on channel `ch` (it ended). O(n on ch + log n).
   void remove_channel(channel_id ch);
@@ -113,6 +121,15 @@ private:
 
   limits limits_;
   std::map<next_hop, neighbour> neighbours_;
+  /// Goodbyes heard (departed): next hop -> the instance that left, and
+  /// the next hops in the order they left (for the bound).
+  struct departure {
+    uint64_t instance = 0;
+    uint64_t stamp = 0; // order of the goodbye
+  };
+  std::map<next_hop, departure> departed_;
+  std::deque<std::pair<next_hop, uint64_t>> departed_order_; // (hop, stamp)
+  uint64_t next_departure_ = 0;
   /// Neighbours per channel (only channels with some).
   std::map<channel_id, size_t> on_channel_;
   uint64_t refused_ = 0;

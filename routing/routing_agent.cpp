@@ -93,7 +93,9 @@ void send_hellos(agent_impl self, bool leaving) {
 void send_update(agent_impl self, const std::vector<module_id>& dests,
                  channel_id only) {
   auto& st = self->state;
-  if (st.channels.empty())
+  // After our goodbye, silence: an update would make us a neighbour again
+  // where it arrives (meet).
+  if (st.channels.empty() || st.leaving)
     return;
   update u;
   u.sender = st.table.self();
@@ -434,6 +436,34 @@ void on_data(agent_impl self, channel_id ch, byte_buffer bytes) {
 
 // -- control packets ------------------------------------------------------------
 
+/// Takes `nh` as a neighbour that says it is `id`, instance `instance`,
+/// with hellos every `interval` (from a hello, or from an update heard
+/// before any hello: `how`). A new or restarted neighbour gets its direct
+/// route and our whole table at once. False when the neighbour table
+/// refuses it (a bound, counted there).
+bool meet(agent_impl self, const next_hop& nh, module_id id,
+          uint64_t instance, std::chrono::milliseconds interval,
+          const char* how) {
+  auto& st = self->state;
+  auto ci = st.channels.find(nh.channel);
+  if (ci == st.channels.end())
+    return false;
+  using result = neighbour_table::hello_result;
+  auto res = st.neighbours.heard(nh, id, instance, interval,
+                                 self->clock().now());
+  if (res == result::refused)
+    return false;
+  if (res == result::added || res == result::restarted) {
+    report_neighbour(self, nh, id, instance, true,
+                     res == result::added ? how : "restarted");
+    apply_change(self, st.table.set_neighbour(nh, ci->second.cost,
+                                              ci->second.code));
+    // Tell the new neighbour everything we know at once.
+    send_update(self, st.table.destinations(), nh.channel);
+  }
+  return true;
+}
+
 void on_hello(agent_impl self, channel_id ch, link_addr src,
               const byte_buffer& bytes) {
   auto& st = self->state;
@@ -454,18 +484,9 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
     }
     return;
   }
-  using result = neighbour_table::hello_result;
-  auto res = st.neighbours.heard(nh, h->sender, h->instance,
-                                 std::chrono::milliseconds(h->interval_ms), now);
-  if (res == result::refused)
+  if (!meet(self, nh, h->sender, h->instance,
+            std::chrono::milliseconds(h->interval_ms), "hello"))
     return;
-  if (res == result::added || res == result::restarted) {
-    report_neighbour(self, nh, h->sender, h->instance, true,
-                     res == result::added ? "hello" : "restarted");
-    apply_change(self, st.table.set_neighbour(nh, ci->second.cost, ci->second.code));
-    // Tell the new neighbour everything we know at once.
-    send_update(self, st.table.destinations(), ch);
-  }
   if (is_unicast(h->sender))
     act(self, st.alloc->on_heard(h->sender, h->instance, now),
         heard_at(self, h->sender, ch, src, "hello"));
@@ -480,8 +501,20 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
   next_hop nh{ch, src};
   auto* from = st.neighbours.find(nh);
   if (!from) {
-    ++st.stats.rx_unknown_neighbour;
-    return;
+    // An update is as good a sign of the link as a hello: the sender heard
+    // our hello first and told us everything at once. Dropping it would
+    // leave us without a route back until its next hello (a hello
+    // interval), while it already routes to us. Its interval is unknown
+    // until that hello: ours is assumed meanwhile. An update that was
+    // overtaken by its sender's goodbye (another priority lane) does not
+    // bring it back.
+    if (st.neighbours.departed(nh, u->instance)
+        || !meet(self, nh, u->sender, u->instance, st.cfg.hello_interval,
+                 "update")) {
+      ++st.stats.rx_unknown_neighbour;
+      return;
+    }
+    from = st.neighbours.find(nh);
   }
   auto hold = st.hold(from->interval);
   auto now = self->clock().now();

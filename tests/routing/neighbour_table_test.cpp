@@ -117,6 +117,42 @@ TEST(neighbour_table, a_goodbye_of_another_instance_or_a_stranger_changes_nothin
   EXPECT_EQ(t.size(), 0u);
 }
 
+TEST(neighbour_table, a_goodbye_is_remembered_until_a_hello_of_that_hop) {
+  neighbour_table t;
+  hello_from(t, 1, 1);
+  EXPECT_FALSE(t.departed({1, 1}, 1001)) << "still here";
+  ASSERT_TRUE(t.goodbye({1, 1}, 1001));
+  EXPECT_TRUE(t.departed({1, 1}, 1001));
+  EXPECT_FALSE(t.departed({1, 1}, 2001)) << "a later life has not left";
+  EXPECT_FALSE(t.departed({1, 2}, 1001));
+  // A goodbye of a stranger or of another life is not a departure.
+  EXPECT_FALSE(t.goodbye({1, 2}, 1002));
+  EXPECT_FALSE(t.departed({1, 2}, 1002));
+  // Back (a restart): no longer departed.
+  EXPECT_EQ(hello_from(t, 1, 1, t0 + 1s, 2001), result::added);
+  EXPECT_FALSE(t.departed({1, 1}, 1001));
+}
+
+TEST(neighbour_table, departures_are_bounded_oldest_forgotten_first) {
+  neighbour_table t{bounds(3, 3)};
+  // Eight neighbours come and go one after the other on channel 1; the
+  // last three goodbyes are remembered.
+  for (link_addr a = 1; a <= 8; ++a) {
+    hello_from(t, 1, a);
+    ASSERT_TRUE(t.goodbye({1, a}, 1000 + a));
+  }
+  for (link_addr a = 1; a <= 8; ++a)
+    EXPECT_EQ(t.departed({1, a}, 1000 + a), a >= 6) << "address " << a;
+  // The same hop leaving again and again takes one place, not many.
+  for (int i = 0; i < 10; ++i) {
+    hello_from(t, 1, 8);
+    ASSERT_TRUE(t.goodbye({1, 8}, 1008));
+  }
+  EXPECT_TRUE(t.departed({1, 8}, 1008));
+  EXPECT_TRUE(t.departed({1, 7}, 1007));
+  EXPECT_TRUE(t.departed({1, 6}, 1006));
+}
+
 TEST(neighbour_table, removing_a_channel_drops_its_neighbours_only) {
   neighbour_table t{bounds(10, 2)};
   for (channel_id ch : {1, 2, 3})
