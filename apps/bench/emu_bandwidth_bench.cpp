@@ -1,7 +1,8 @@
 // Bandwidth of the emulated medium (link kind "emu") as a receiver sees it.
 //
 // For each profile, one station sends back-to-back MTU-sized frames to
-// another through the real driver (two drivers, sockets, threads). Each
+// another through the real driver (two drivers, sockets, and an event loop
+// each, as in two modules). Each
 // iteration is one burst; its manual time is the medium time the receiver
 // observed, from the first frame's arrival to the last one's, so the
 // reported time and rates are the medium's, not the sender's loop.
@@ -36,6 +37,7 @@
 #include "actors/runtime/error.hpp"
 #include "apps/bench/bench_common.hpp"
 #include "channels/drivers/emu_wire.hpp"
+#include "channels/event_loop.hpp"
 #include "channels/link_driver.hpp"
 
 using namespace herm;
@@ -99,9 +101,17 @@ void emu_bandwidth(benchmark::State& state, const char* profile,
     return;
   auto tx = stations->tx;
   auto rx = stations->rx;
+  // Each station on an event loop of its own, as in two modules: the
+  // sender's transmit step and the receiver's reading run in parallel.
+  auto tx_io = io_thread::make();
+  auto rx_io = io_thread::make();
+  if (!tx_io || !rx_io) {
+    state.SkipWithError("cannot start the event loops");
+    return;
+  }
   auto counter = std::make_shared<arrival_counter>();
-  rx->start(counter);
-  tx->start(std::make_shared<arrival_counter>());
+  rx->start(counter, (*rx_io)->loop());
+  tx->start(std::make_shared<arrival_counter>(), (*tx_io)->loop());
   auto& prof = tx->profile();
   auto frame_bits = double(prof.mtu) * 8 + prof.frame_overhead_bits;
   auto frame_ns = emu::frame_time_ns(prof.mtu, prof.frame_overhead_bits,

@@ -14,36 +14,31 @@
 // station with the time its transmission ends; receivers hold frames until
 // then, so all hear the bus in one order, and filter by destination like a
 // controller. Frame times are real CAN frame lengths at the configured bit
-// rate (can::frame_bits). See transmit_loop and docs/protocol.md.
+// rate (can::frame_bits). See transmit_step and docs/protocol.md.
 //
-// Threads: receiving runs on the event loop given to start() (the
-// station's readiness callback and loop timers, emu_medium.hpp); the
-// frame_handler is called on the loop thread only, on_failure at most once.
-// Each driver keeps one transmit thread, the emulated bus itself:
-// arbitration (it naps between looks at the bus), pacing at the bit rate
-// and fan-out; a loop callback must not sleep like that. A fatal send
-// error reaches the loop with event_loop::post. send() never blocks beyond
-// a mutex. stop() (any thread, idempotent, also from a handler) unwatches
-// and cancels on the loop, joins the transmit thread and leaves the bus; no
-// handler call follows its return. From a handler that join runs on the
-// loop thread: the transmit thread ends within one send, at most
-// emu_medium::overrun_wait_ns when a receiver's queue is full.
+// Threads: none of its own. Receiving runs on the event loop given to
+// start() (the station's readiness callback and loop timers,
+// emu_medium.hpp), and so does transmitting: the emulated bus is a
+// transmit step (transmit_step) that arbitrates, paces at the bit rate and
+// fans out, and waits for the bus with loop timers instead of sleeping
+// (emu_medium::tx_pump). The frame_handler is called on the loop thread
+// only, on_failure at most once. send() never blocks beyond a mutex: on
+// the loop thread the step runs within it, from another thread in the
+// loop's next turn. stop() (any thread, idempotent, also from a handler)
+// stops the step, unwatches and cancels on the loop and leaves the bus;
+// no handler call follows its return.
 
 #include "channels/drivers/can_emu.hpp"
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <cstddef>
 #include <cstring>
 #include <mutex>
 #include <string>
 #include <system_error>
-#include <thread>
 #include <vector>
-
-#include <sys/prctl.h>
 
 #include <linux/can.h>
 #include <linux/can/error.h>
@@ -76,7 +71,7 @@ constexpr int64_t heartbeat_period_ns = 100'000'000;
 /// A published frame whose station has not shown a heartbeat for this long
 /// belongs to a dead or stopped process: arbitration ignores it.
 constexpr int64_t stale_ns = 1'000'000'000;
-/// How long a station that lost arbitration naps before looking again (the
+/// How long a station that lost arbitration waits before looking again (the
 /// winner takes the bus within microseconds).
 constexpr int64_t backoff_ns = 20'000;
 /// Bits an error frame adds after a destroyed frame: error flag (6) plus
@@ -159,26 +154,21 @@ public:
     return station_.open(cfg_.create);
   }
 
-
-  caf::error start_transmitter() {
-    if (auto why = posix::start_thread(tx_thread_, "transmit",
-                                       [this] { transmit_loop(); }))
-      return fail(ec::device_unavailable, *why);
-    return caf::none;
-  }
-
   // -- link_driver ---------------------------------------------------------------
 
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    return life_.start(station_, std::move(handler), loop,
-                       wire::header_size + CANFD_MTU);
+    if (auto err = life_.start(station_, std::move(handler), loop,
+                               wire::header_size + CANFD_MTU))
+      return err;
+    pump_.start(loop, [this] { transmit_step(); });
+    return caf::none;
   }
 
   void stop() override {
+    // First, outside the life cycle's lock: it waits for the loop thread.
+    pump_.stop();
     life_.stop(station_, gate_, [this] {
-      if (tx_thread_.joinable())
-        tx_thread_.join();
       if (station_.state() != nullptr) {
         auto& me = bus().slots[cfg_.node];
         me.pending.store(0);
@@ -200,7 +190,6 @@ public:
     f.order = std::min(priority, can::max_priority);
     f.bits = can::frame_bits(cfg_.format, f.frame.len, cfg_.stuffing);
     f.enqueued_at = now_ns();
-    bool wake = false;
     {
       std::lock_guard<std::mutex> guard{gate_.mutex()};
       if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
@@ -209,12 +198,12 @@ public:
       queue_.push_back(f);
       std::push_heap(queue_.begin(), queue_.end(), later);
       // Published before send() returns: from now on, the frame takes
-      // part in every arbitration on the bus.
-      publish(queue_.front());
-      wake = gate_.must_wake();
+      // part in every arbitration on the bus. Not before start: nothing
+      // would transmit it.
+      if (pump_.started())
+        publish(queue_.front());
     }
-    if (wake)
-      gate_.wake();
+    pump_.kick();
     return caf::none;
   }
 
@@ -362,16 +351,16 @@ private:
                                  busy);
   }
 
-  // Arbitration, one frame at a time:
+  // Arbitration, one frame at a time, in transmit_step on the event loop:
   //  1. The lowest queued frame is published in our slot with its ready
   //     time (send() does that before it returns).
-  //  2. While the bus is busy, sleep until it is idle.
+  //  2. While the bus is busy, wait (a loop timer) until it is idle.
   //  3. Decide the arbitration (emu_medium::arbitrate): the frames ready
   //     when the bus first was idle with something to send compete; the
-  //     lowest key wins. A loser naps briefly and goes to 2 (the winner
+  //     lowest key wins. A loser waits briefly and goes to 2 (the winner
   //     will have taken the bus).
   //  4. The winner's transmission starts at that arbitration point, or at
-  //     now - max_credit_ns if the thread woke later than that: frames
+  //     now - max_credit_ns if the loop came later than that: frames
   //     queued back to back leave no gaps despite wake-up latency, and a
   //     stalled process cannot release an unbounded burst.
   //  5. Take the bus with compare_exchange(busy_until: idle -> start +
@@ -379,28 +368,35 @@ private:
   //     periods never overlap, so the bus never carries more than its bit
   //     rate. A station that lost the exchange goes to 2.
   //  6. Send the frame to every other station, to be delivered when the
-  //     transmission ends.
-  void transmit_loop() {
-    ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0); // precise wake-ups
-    std::vector<uint8_t> buf(wire::header_size + CANFD_MTU);
+  //     transmission ends. A receiver whose queue is full gets it later
+  //     (station::retry_stalled); meanwhile no further frame goes out.
+  void transmit_step() {
     auto& busy_until = bus().busy_until;
+    if (station_.stalled() && !station_.retry_stalled(now_ns())) {
+      pump_.at(now_ns() + emu_medium::stall_retry_ns);
+      return;
+    }
     std::unique_lock<std::mutex> lk{gate_.mutex()};
-    for (;;) {
-      if (!gate_.wait_for_work(lk, [this] { return !queue_.empty(); }))
-        break;
+    for (int sent = 0; !gate_.closed() && !queue_.empty();) {
+      if (station_.failed())
+        return;
+      if (sent == emu_medium::max_frames_per_step) {
+        pump_.at(now_ns()); // the loop's other work first
+        return;
+      }
       auto& head = queue_.front();
       publish(head);
       auto now = now_ns();
       auto busy = busy_until.load();
       if (busy > now) {
-        gate_.sleep_until(lk, std::min(busy, now + heartbeat_period_ns));
-        continue;
+        pump_.at(std::min(busy, now + heartbeat_period_ns));
+        return;
       }
       auto arb = arbitrate(head, busy, now);
       if (!arb.wins) {
         ++arbitration_lost_;
-        gate_.sleep_until(lk, now + backoff_ns);
-        continue;
+        pump_.at(now + backoff_ns);
+        return;
       }
       auto start = std::max(arb.point, now - emu_medium::max_credit_ns);
       bool destroyed = dice_.chance(error_rate_.load());
@@ -418,17 +414,21 @@ private:
           publish(queue_.front());
       }
       lk.unlock();
+      ++sent;
       if (destroyed)
         ++tx_errors_;
       else
         ++tx_frames_;
-      if (!station_.failed() && !fan_out(f, end, destroyed, buf)) {
-        lk.lock();
-        break;
+      if (!station_.failed() && !fan_out(f, end, destroyed, buf_))
+        return;
+      if (station_.stalled()) {
+        pump_.at(now_ns() + emu_medium::stall_retry_ns);
+        return;
       }
       lk.lock();
     }
-    unpublish();
+    if (gate_.closed())
+      unpublish();
   }
 
   /// Sends one frame (or, when `destroyed`, an error frame) to the stations
@@ -505,7 +505,7 @@ private:
   std::atomic<double> error_rate_;
 
   emu_medium::station_life life_;
-  std::thread tx_thread_;
+  emu_medium::tx_pump pump_;
 
   // Transmit queue (a heap, see `later`) and our slot, guarded by
   // gate_.mutex().
@@ -515,8 +515,9 @@ private:
   uint64_t published_ = 0;
   int64_t published_ready_ = 0;
 
-  // Transmit thread only.
+  // The transmit step only (the loop thread).
   emu_medium::dice dice_;
+  std::vector<uint8_t> buf_ = std::vector<uint8_t>(wire::header_size + CANFD_MTU);
 
   // Counters (get_param).
   std::atomic<uint64_t> tx_lost_{0};
@@ -529,8 +530,6 @@ private:
 caf::expected<link_driver_ptr> open_emulated_bus(can_config cfg) {
   auto driver = std::make_shared<emu_can_driver>(std::move(cfg));
   if (auto err = driver->open())
-    return err;
-  if (auto err = driver->start_transmitter())
     return err;
   return link_driver_ptr{std::move(driver)};
 }

@@ -9,7 +9,7 @@
 namespace herm::can {
 
 /// Joins the emulated bus in `cfg.interface` (a directory, created unless
-/// cfg.create is false) as node cfg.node and starts its transmit thread.
+/// cfg.create is false) as node cfg.node (it transmits on the event loop given to start()).
 /// Errors: ec::device_unavailable (directory, bus file, bit rate of the
 /// stations already on the bus, sockets, threads), ec::already_exists (the
 /// node id is taken), naming the device and the paths.

@@ -9,39 +9,35 @@
 // point-to-point link gives each of its two stations its own slot (full
 // duplex).
 //
-// Threads: receiving runs on the event loop given to start() (the
-// station's readiness callback and loop timers, emu_medium.hpp): it
-// validates datagrams, holds them until their delivery time, checks that
-// the socket file still exists and calls the frame_handler, on the loop
-// thread only, on_failure at most once. Each driver keeps one transmit
-// thread, the emulated wire itself: it paces frames at the medium's
-// bandwidth (sleeping out frame times, which no loop callback may do),
-// applies loss, duplication, corruption and jitter and sends the datagrams;
-// a fatal send error reaches the loop with event_loop::post. send() is
-// non-blocking (a queue behind a mutex), from any thread.
+// Threads: none of its own; everything runs on the event loop given to
+// start(). Receiving: the station's readiness callback and loop timers
+// (emu_medium.hpp) validate datagrams, hold them until their delivery
+// time, check that the socket file still exists and call the
+// frame_handler, on the loop thread only, on_failure at most once.
+// Transmitting: a transmit step (emu_medium::tx_pump) paces frames at the
+// medium's bandwidth, waiting out frame times with loop timers, applies
+// loss, duplication, corruption and jitter and sends the datagrams. send()
+// is non-blocking (a queue behind a mutex), from any thread: on the loop
+// thread the step runs within it, from another in the loop's next turn.
 //
-// Life cycle: open (joins the medium, starts the transmit thread), start
-// (registers the socket and timers with the loop through run_sync; once),
-// stop (any thread, idempotent, also from a handler: unwatches and cancels
-// on the loop, joins the transmit thread, leaves the medium; no handler
-// call after it returns). From a handler that join runs on the loop
-// thread: the transmit thread ends within one send, at most
-// emu_medium::overrun_wait_ns when a receiver's queue is full.
+// Life cycle: open (joins the medium), start (registers the socket and
+// timers with the loop through run_sync, starts the transmit step; once),
+// stop (any thread, idempotent, also from a handler: stops the step,
+// unwatches and cancels on the loop, leaves the medium; no handler call
+// after it returns). Frames sent before start wait for it.
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <cstddef>
 #include <cstring>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <string>
-#include <thread>
 #include <vector>
 
-#include <sys/prctl.h>
 #include <sys/un.h>
 
 #include "channels/error.hpp"
@@ -214,23 +210,21 @@ public:
     return station_.open(cfg_.create);
   }
 
-  void start_transmitter() {
-    tx_thread_ = std::thread{[this] { transmit_loop(); }};
-  }
-
   // -- link_driver ---------------------------------------------------------------
 
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    return life_.start(station_, std::move(handler), loop,
-                       emu::wire_header_size + cfg_.profile.mtu);
+    if (auto err = life_.start(station_, std::move(handler), loop,
+                               emu::wire_header_size + cfg_.profile.mtu))
+      return err;
+    pump_.start(loop, [this] { transmit_step(); });
+    return caf::none;
   }
 
   void stop() override {
-    life_.stop(station_, gate_, [this] {
-      if (tx_thread_.joinable())
-        tx_thread_.join();
-    });
+    // First, outside the life cycle's lock: it waits for the loop thread.
+    pump_.stop();
+    life_.stop(station_, gate_, [] {});
   }
 
   caf::error send(link_addr dst, const uint8_t* data, size_t size,
@@ -248,7 +242,6 @@ public:
     if (station_.failed())
       return make_error(ec::device_failed, prefix_ + "the link has failed");
     auto enqueued_at = now_ns();
-    bool wake = false;
     {
       std::lock_guard<std::mutex> guard{gate_.mutex()};
       if (auto err = gate_.admit(queue_.size(), cfg_.queue, prefix_))
@@ -258,10 +251,8 @@ public:
       f.dst = dst;
       f.enqueued_at = enqueued_at;
       queue_.push_back(std::move(f));
-      wake = gate_.must_wake();
     }
-    if (wake)
-      gate_.wake();
+    pump_.kick();
     return caf::none;
   }
 
@@ -420,36 +411,56 @@ private:
            + " is already taken on medium '" + cfg_.dir + "'";
   }
 
-  // -- transmit thread -----------------------------------------------------------
+  // -- transmit step (the event loop) --------------------------------------------
 
-  void transmit_loop() {
-    ::prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0); // precise wake-ups
-    std::vector<uint8_t> buf(emu::wire_header_size + cfg_.profile.mtu);
+  /// The emulated wire, on the event loop: takes the next frame, reserves
+  /// its time on the medium (emu_medium::reserve: after the frames before
+  /// it, back to back on credit) and puts it on the medium when its
+  /// transmission ends, waiting for that with a loop timer. At most
+  /// emu_medium::max_frames_per_step frames per call; a receiver whose
+  /// queue is full holds the next frame back (station::retry_stalled).
+  void transmit_step() {
+    if (station_.stalled() && !station_.retry_stalled(now_ns())) {
+      pump_.at(now_ns() + emu_medium::stall_retry_ns);
+      return;
+    }
     auto& slot = medium().busy_until[cfg_.p2p ? station_.number() : 0];
-    std::unique_lock<std::mutex> lk{gate_.mutex()};
-    for (;;) {
-      if (!gate_.wait_for_work(lk, [this] { return !queue_.empty(); }))
-        return;
-      auto f = std::move(queue_.front());
-      queue_.pop_front();
-      lk.unlock();
-      auto frame_ns = emu::frame_time_ns(f.bytes.size(),
+    for (int sent = 0; !station_.failed();) {
+      if (in_flight_) {
+        if (now_ns() < in_flight_end_) {
+          pump_.at(in_flight_end_);
+          return;
+        }
+        auto f = std::move(*in_flight_);
+        in_flight_.reset();
+        if (!transmit(f, in_flight_end_, buf_))
+          return;
+        {
+          std::lock_guard<std::mutex> guard{gate_.mutex()};
+          if (spare_.size() < std::min<uint64_t>(cfg_.queue, 64))
+            spare_.push_back(std::move(f.bytes));
+        }
+        if (station_.stalled()) {
+          pump_.at(now_ns() + emu_medium::stall_retry_ns);
+          return;
+        }
+        if (++sent == emu_medium::max_frames_per_step) {
+          pump_.at(now_ns()); // the loop's other work first
+          return;
+        }
+      }
+      {
+        std::lock_guard<std::mutex> guard{gate_.mutex()};
+        if (gate_.closed() || queue_.empty())
+          return;
+        in_flight_ = std::move(queue_.front());
+        queue_.pop_front();
+      }
+      auto frame_ns = emu::frame_time_ns(in_flight_->bytes.size(),
                                          cfg_.profile.frame_overhead_bits,
                                          bandwidth_.load());
-      auto end = emu_medium::reserve(slot, f.enqueued_at, frame_ns, now_ns);
-      // Wait for the end of transmission on an absolute deadline, so errors
-      // do not add up; stop() interrupts.
-      lk.lock();
-      while (!gate_.closed() && now_ns() < end)
-        gate_.sleep_until(lk, end);
-      if (gate_.closed())
-        return;
-      lk.unlock();
-      if (!station_.failed() && !transmit(f, end, buf))
-        return;
-      lk.lock();
-      if (spare_.size() < std::min<uint64_t>(cfg_.queue, 64))
-        spare_.push_back(std::move(f.bytes));
+      in_flight_end_ = emu_medium::reserve(slot, in_flight_->enqueued_at,
+                                           frame_ns, now_ns);
     }
   }
 
@@ -559,15 +570,20 @@ private:
   std::atomic<uint64_t> bandwidth_;
 
   emu_medium::station_life life_;
-  std::thread tx_thread_;
+  emu_medium::tx_pump pump_;
 
   // Transmit queue, guarded by gate_.mutex().
   emu_medium::tx_gate gate_;
   std::deque<tx_frame> queue_;
   std::vector<std::vector<uint8_t>> spare_;
 
-  // Transmit thread only.
+  // The transmit step only (the loop thread): the frame on the medium now
+  // and when its transmission ends.
   emu_medium::dice dice_;
+  std::optional<tx_frame> in_flight_;
+  int64_t in_flight_end_ = 0;
+  std::vector<uint8_t> buf_
+    = std::vector<uint8_t>(emu::wire_header_size + cfg_.profile.mtu);
 
   // Counters (get_param).
   std::atomic<uint64_t> tx_frames_{0};
@@ -583,7 +599,6 @@ caf::expected<link_driver_ptr> open_emu(const device_config& cfg) {
   auto driver = std::make_shared<emu_driver>(std::move(*conf));
   if (auto err = driver->open())
     return err;
-  driver->start_transmitter();
   return link_driver_ptr{std::move(driver)};
 }
 

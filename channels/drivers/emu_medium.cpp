@@ -264,15 +264,13 @@ caf::error station::claim() {
   if (spec_.rcvbuf > 0)
     ::setsockopt(rx_fd_.get(), SOL_SOCKET, SO_RCVBUF, &spec_.rcvbuf,
                  sizeof(spec_.rcvbuf));
-  // Transmit socket: blocking with a send timeout, so a receiver whose
-  // queue is full (net.unix.max_dgram_qlen is small) gets a short grace
-  // period before its frame counts as an overrun.
+  // Transmit socket, used with MSG_DONTWAIT: a receiver whose queue is
+  // full (net.unix.max_dgram_qlen is small) gets a short grace period
+  // before its frame counts as an overrun (send_to, retry_stalled).
   tx_fd_.reset(::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0));
   if (!tx_fd_)
     return fail(ec::device_unavailable,
                 "cannot create socket: " + errno_text(errno));
-  timeval tv{0, overrun_wait_ns / 1000};
-  ::setsockopt(tx_fd_.get(), SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof(tv));
   if (spec_.sndbuf > 0)
     ::setsockopt(tx_fd_.get(), SOL_SOCKET, SO_SNDBUF, &spec_.sndbuf,
                  sizeof(spec_.sndbuf));
@@ -291,7 +289,11 @@ std::atomic<uint32_t>& station::generation() const {
 station::send_result station::send_to(uint64_t dst, const uint8_t* data,
                                       size_t size) {
   auto& addr = peer_addrs_[dst];
-  int flags = MSG_NOSIGNAL | (congested_[dst] ? MSG_DONTWAIT : 0);
+  // Never blocks the loop; keeps the order to a receiver that stalls.
+  for (auto& x : stalled_)
+    if (x.dst == dst)
+      return stall(dst, data, size);
+  int flags = MSG_NOSIGNAL | MSG_DONTWAIT;
   for (;;) {
     if (::sendto(tx_fd_.get(), data, size, flags,
                  reinterpret_cast<const sockaddr*>(&addr), sizeof(addr))
@@ -306,6 +308,8 @@ station::send_result station::send_to(uint64_t dst, const uint8_t* data,
       case EAGAIN:
       case ENOBUFS:
       case ENOMEM:
+        if (!congested_[dst])
+          return stall(dst, data, size);
         // Receiver overrun: the frame is lost for this receiver.
         ++overruns_;
         congested_[dst] = true;
@@ -341,6 +345,134 @@ void station::refresh_peers() {
   peers_valid_ = true;
   peers_generation_ = gen;
   peers_scanned_at_ = now;
+}
+
+station::send_result station::stall(uint64_t dst, const uint8_t* data,
+                                    size_t size) {
+  if (stalled_.size() >= max_stalled) {
+    ++overruns_;
+    congested_[dst] = true;
+    return send_result::ok;
+  }
+  if (stalled_.empty())
+    stall_since_ = now_ns();
+  stalled_.push_back(stalled_datagram{dst, {data, data + size}});
+  return send_result::ok;
+}
+
+bool station::retry_stalled(int64_t now) {
+  bool blocked[max_station + 1] = {};
+  bool progress = false;
+  size_t kept = 0;
+  for (size_t i = 0; i < stalled_.size(); ++i) {
+    auto& x = stalled_[i];
+    bool keep = blocked[x.dst];
+    while (!keep) {
+      auto& addr = peer_addrs_[x.dst];
+      if (::sendto(tx_fd_.get(), x.bytes.data(), x.bytes.size(),
+                   MSG_NOSIGNAL | MSG_DONTWAIT,
+                   reinterpret_cast<const sockaddr*>(&addr), sizeof(addr))
+          >= 0) {
+        congested_[x.dst] = false;
+        progress = true;
+        break;
+      }
+      auto err = errno;
+      if (err == EINTR)
+        continue;
+      if (err == EAGAIN || err == ENOBUFS || err == ENOMEM) {
+        blocked[x.dst] = true;
+        keep = true;
+      } else if (err != ENOENT && err != ECONNREFUSED && err != ENOTDIR
+                 && err != EACCES && err != EPERM) {
+        stalled_.clear();
+        report_tx_failure(fail(ec::device_failed,
+                               std::string{"cannot send on "}
+                                 + spec_.texts.link_noun + " " + dir_ + ": "
+                                 + errno_text(err)));
+        return true;
+      }
+      break; // sent, or nobody there (any more): nothing to keep
+    }
+    if (keep) {
+      if (kept != i)
+        stalled_[kept] = std::move(x);
+      ++kept;
+    }
+  }
+  stalled_.resize(kept);
+  if (progress)
+    stall_since_ = now;
+  if (!stalled_.empty() && now - stall_since_ >= overrun_wait_ns) {
+    // The receivers did not read for the whole grace period: overruns.
+    for (auto& x : stalled_) {
+      ++overruns_;
+      congested_[x.dst] = true;
+    }
+    stalled_.clear();
+  }
+  return stalled_.empty();
+}
+
+// -- tx_pump ---------------------------------------------------------------------
+
+void tx_pump::start(event_loop& loop, std::function<void()> step) {
+  step_ = std::move(step);
+  loop_.store(&loop);
+  kick();
+}
+
+void tx_pump::kick() {
+  auto* loop = loop_.load();
+  if (loop == nullptr || flags_->stopped.load())
+    return;
+  if (loop->in_loop_thread()) {
+    if (!timer_ && !running_)
+      run();
+    return;
+  }
+  if (flags_->posted.exchange(true))
+    return; // a task is on its way
+  loop->post([this, f = flags_] {
+    if (f->stopped.load())
+      return;
+    f->posted.store(false);
+    if (!timer_ && !running_)
+      run();
+  });
+}
+
+void tx_pump::at(int64_t due_ns) {
+  auto* loop = loop_.load();
+  if (timer_) {
+    if (timer_at_ <= due_ns)
+      return;
+    loop->cancel_timer(timer_);
+  }
+  timer_at_ = due_ns;
+  timer_ = loop->add_timer(due_ns, [this, f = flags_] {
+    if (f->stopped.load())
+      return;
+    timer_ = {};
+    run();
+  });
+}
+
+void tx_pump::run() {
+  running_ = true;
+  step_();
+  running_ = false;
+}
+
+void tx_pump::stop() {
+  if (flags_->stopped.exchange(true))
+    return;
+  if (auto* loop = loop_.load())
+    loop->run_sync([this] {
+      if (timer_)
+        loop_.load()->cancel_timer(timer_);
+      timer_ = {};
+    });
 }
 
 void station::report_tx_failure(caf::error err) {
@@ -416,7 +548,7 @@ caf::error station::attach(event_loop& loop, size_t max_datagram) {
     post_to_ = &loop;
     pending = static_cast<bool>(tx_failure_);
   }
-  if (pending) // the transmit thread failed before start
+  if (pending) // the transmit step failed before start
     loop.post([this, stop] {
       if (!stop->load())
         on_tx_failure();
@@ -587,7 +719,7 @@ void station::on_liveness_timer() {
   arm_liveness_timer();
 }
 
-/// Loop thread: a failure the transmit thread posted.
+/// Loop thread: a failure the transmit step posted.
 void station::on_tx_failure() {
   if (!receiving_)
     return; // receiving ended (a failure was reported already)

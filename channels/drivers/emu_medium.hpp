@@ -24,19 +24,19 @@
 // event_loop.hpp): the station watches its receive socket there and keeps
 // two loop timers, one for the earliest held datagram (latency, jitter,
 // end of transmission) and one for the liveness check of its files; it
-// owns no receive thread. Transmitting still runs on one transmit thread
-// per driver (send_to, for_each_peer, report_tx_failure), because that
-// thread IS the emulated wire: it sleeps out frame times at the medium's
-// bandwidth and, on the CAN bus, arbitration back-offs, which a loop
-// callback must not do. A fatal transmit error reaches the loop with
-// event_loop::post. start_receiving, stop_receiving, request_stop, failed
-// and counters may be called from any thread; open and leave by the
-// driver's life cycle only (leave: after the transmit thread ended and
-// stop_receiving returned).
+// owns no receive thread. Transmitting runs on the loop too: each driver's
+// transmit step (tx_pump; send_to, for_each_peer, retry_stalled) is the
+// emulated wire. It never sleeps: it waits out frame times at the
+// medium's bandwidth and, on the CAN bus, a busy bus and arbitration
+// back-offs with loop timers, and it never blocks on a receiver's full
+// queue (the datagram stalls and is retried). A fatal transmit error
+// reaches the loop with event_loop::post. start_receiving, stop_receiving,
+// request_stop, failed and counters may be called from any thread; open
+// and leave by the driver's life cycle only (leave: after the transmit
+// step stopped and stop_receiving returned).
 
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -77,8 +77,16 @@ constexpr int64_t liveness_period_ns = 100'000'000;
 /// or leaves through a driver: the state file's generation counter).
 constexpr int64_t rescan_period_ns = 100'000'000;
 /// Grace period a transmitter gives a receiver whose socket queue is full
-/// before the frame counts as an overrun (SO_SNDTIMEO).
+/// before the frame counts as an overrun (station::retry_stalled).
 constexpr int64_t overrun_wait_ns = 25'000'000;
+/// Datagrams a station keeps for receivers whose queues are full
+/// (station::send_to); beyond, they are overruns.
+constexpr size_t max_stalled = 512;
+/// How often such a station retries them.
+constexpr int64_t stall_retry_ns = 200'000;
+/// Frames one transmit step sends at most (a burst on credit) before the
+/// loop's other work, receiving included, gets its turn.
+constexpr int max_frames_per_step = 16;
 /// Bound of the back-to-back credit (see reserve, emu::transmission_start).
 constexpr int64_t max_credit_ns = 50'000'000;
 /// Datagrams a receiver holds for later delivery; above this, the earliest
@@ -93,7 +101,7 @@ constexpr int max_reads_per_wakeup = 64;
 
 /// The medium's random decisions from one seeded generator. The sequence of
 /// draws is part of what a seed reproduces, so each function states what it
-/// draws. Not thread-safe: one owner (a transmit thread).
+/// draws. Not thread-safe: one owner (a transmit step).
 class dice {
 public:
   explicit dice(uint64_t seed) : rng_(seed) {
@@ -271,10 +279,10 @@ private:
 
 // -- the transmit hand-over -----------------------------------------------------
 
-/// The hand-over between send() (any thread) and a driver's transmit thread:
+/// The hand-over between send() (any thread) and a driver's transmit step:
 /// the mutex that guards the driver's queue (FIFO, priority heap: the
-/// driver's own), the condition the transmit thread sleeps on, and the
-/// closed flag. Members marked "lock held" need mutex() held by the caller.
+/// driver's own) and the closed flag. Members marked "lock held" need
+/// mutex() held by the caller.
 class tx_gate {
 public:
   std::mutex& mutex() {
@@ -287,59 +295,75 @@ public:
   caf::error admit(size_t queued, size_t capacity,
                    const std::string& prefix) const;
 
-  /// send(), lock held, after queueing: whether the transmit thread waits
-  /// for work. Then call wake() once the lock is released, so that the
-  /// thread does not wake only to block on the lock the caller still holds
-  /// (one more sleep and wake of it per frame).
-  bool must_wake() const {
-    return idle_;
-  }
-
-  /// Any thread, lock not held: wakes a transmit thread waiting for work
-  /// (must_wake). A wake it does not need is harmless: it checks its queue
-  /// and sleeps again.
-  void wake() {
-    cv_.notify_one();
-  }
-
-  /// Transmit thread, lock held by `lk`: sleeps until `has_work()` or
-  /// close(). False when closed.
-  template <class F>
-  bool wait_for_work(std::unique_lock<std::mutex>& lk, F&& has_work) {
-    idle_ = true;
-    cv_.wait(lk, [&] { return closed_ || has_work(); });
-    idle_ = false;
-    return !closed_;
-  }
-
-  /// Transmit thread, lock held by `lk`: sleeps until `deadline_ns`
-  /// (CLOCK_MONOTONIC, libstdc++'s steady_clock), close() or a spurious
-  /// wake-up; callers re-check their condition.
-  void sleep_until(std::unique_lock<std::mutex>& lk, int64_t deadline_ns) {
-    cv_.wait_until(lk, std::chrono::steady_clock::time_point{
-                         std::chrono::nanoseconds{deadline_ns}});
-  }
-
   /// Lock held.
   bool closed() const {
     return closed_;
   }
 
-  /// Any thread, lock not held: refuses further frames and wakes the
-  /// transmit thread, which then ends.
+  /// Any thread, lock not held: refuses further frames; the transmit step
+  /// takes none any more.
   void close() {
-    {
-      std::lock_guard<std::mutex> guard{mtx_};
-      closed_ = true;
-    }
-    cv_.notify_all();
+    std::lock_guard<std::mutex> guard{mtx_};
+    closed_ = true;
   }
 
 private:
   std::mutex mtx_;
-  std::condition_variable cv_;
   bool closed_ = false;
-  bool idle_ = false;
+};
+
+// -- transmitting on the event loop ---------------------------------------------
+
+/// Runs a driver's transmit step on the module's event loop: the emulated
+/// wire without a thread of its own. The step sends what the medium lets
+/// it send now and, when it must wait (the bus is busy, arbitration lost,
+/// a receiver's queue full), asks to run again at a time (at); it never
+/// sleeps. send() kicks it: on the loop thread the step runs within the
+/// call, from another thread in the loop's next turn.
+///
+/// Threading: start, kick and stop from any thread; at from the step only.
+/// After stop returns no step runs (a task posted earlier finds the flag;
+/// the timer is cancelled on the loop).
+class tx_pump {
+public:
+  tx_pump() = default;
+  tx_pump(const tx_pump&) = delete;
+  tx_pump& operator=(const tx_pump&) = delete;
+
+  /// Once: the step runs on `loop` from now on, a first time in the loop's
+  /// next turn (for frames queued before).
+  void start(event_loop& loop, std::function<void()> step);
+
+  bool started() const {
+    return loop_.load() != nullptr;
+  }
+
+  /// The step runs soon, unless a timer already will run it. No effect
+  /// before start or after stop.
+  void kick();
+
+  /// From the step: runs it again at `due_ns` (CLOCK_MONOTONIC); the
+  /// earliest time asked for wins.
+  void at(int64_t due_ns);
+
+  /// Idempotent. Not from within the step. Must not be called while
+  /// holding anything a loop callback waits for (event_loop::run_sync).
+  void stop();
+
+private:
+  struct flags {
+    std::atomic<bool> stopped{false};
+    std::atomic<bool> posted{false};
+  };
+  void run();
+
+  std::shared_ptr<flags> flags_ = std::make_shared<flags>();
+  std::atomic<event_loop*> loop_{nullptr};
+  std::function<void()> step_;
+  // Loop thread only.
+  bool running_ = false;
+  event_loop::timer_handle timer_;
+  int64_t timer_at_ = 0;
 };
 
 // -- one station on a medium ---------------------------------------------------
@@ -408,7 +432,7 @@ public:
   virtual void deliver(const uint8_t* data, size_t size) = 0;
 
   /// Loop thread: a fatal error (receive side, liveness or a transmit
-  /// error posted by the transmit thread); receiving ends right before.
+  /// error posted by the transmit step); receiving ends right before.
   /// Called at most once, never after request_stop.
   virtual void fail(caf::error err) = 0;
 };
@@ -456,11 +480,14 @@ public:
 
   caf::error fail(ec code, const std::string& what) const;
 
-  // -- transmit thread ----------------------------------------------------------
+  // -- transmit side (the driver's transmit step) --------------------------------
 
-  /// Sends one datagram to station `dst` (1..254). A receiver that overran
-  /// once gets no grace period until it takes a datagram again, so a stuck
-  /// station cannot stall the medium. Never blocks beyond overrun_wait_ns.
+  /// Sends one datagram to station `dst` (1..254); never blocks. A datagram
+  /// that the receiver's full queue refuses waits in the station (stalled),
+  /// and later datagrams to that receiver queue behind it, until
+  /// retry_stalled sends them or, after overrun_wait_ns, drops them as
+  /// overruns. A receiver that overran once gets no grace period until it
+  /// takes a datagram again, so a stuck station cannot stall the medium.
   send_result send_to(uint64_t dst, const uint8_t* data, size_t size);
 
   /// Calls `f(peer)` (returning send_result) for every station on the
@@ -481,6 +508,17 @@ public:
     }
     return true;
   }
+
+  /// Whether datagrams wait for a receiver (send_to).
+  bool stalled() const {
+    return !stalled_.empty();
+  }
+
+  /// Sends the stalled datagrams that receivers take now, in order per
+  /// receiver; drops the rest as overruns once the oldest has waited
+  /// overrun_wait_ns without any of them going out. True when none is left.
+  /// O(stalled); memory: at most max_stalled datagrams.
+  bool retry_stalled(int64_t now);
 
   /// Marks the station failed and hands a fatal transmit error to the
   /// loop (event_loop::post), which reports it through client.fail unless
@@ -532,7 +570,7 @@ public:
 
   // -- life cycle ---------------------------------------------------------------
 
-  /// Leaves the medium once the transmit thread has ended and
+  /// Leaves the medium once the transmit step has stopped and
   /// stop_receiving returned: removes our socket file (unless somebody
   /// else's replaced it), tells transmitters, closes both sockets.
   void leave();
@@ -584,7 +622,14 @@ private:
   std::atomic<event_loop*> loop_{nullptr};
   std::atomic<uint64_t> overruns_{0};
 
-  // Transmit thread only.
+  // Transmit side only (the transmit step).
+  send_result stall(uint64_t dst, const uint8_t* data, size_t size);
+  struct stalled_datagram {
+    uint64_t dst = 0;
+    std::vector<uint8_t> bytes;
+  };
+  std::vector<stalled_datagram> stalled_;
+  int64_t stall_since_ = 0;
   sockaddr_un peer_addrs_[max_station + 1] = {};
   bool congested_[max_station + 1] = {};
   std::vector<uint64_t> peers_;
@@ -592,7 +637,7 @@ private:
   uint32_t peers_generation_ = 0;
   int64_t peers_scanned_at_ = 0;
 
-  // Failure handed from the transmit thread to the loop; post_to_ is the
+  // Failure handed from the transmit step to the loop; post_to_ is the
   // loop while receiving (set and cleared on the loop thread).
   std::mutex failure_mtx_;
   caf::error tx_failure_;
@@ -640,7 +685,7 @@ public:
 
   /// Idempotent. Closes `gate` (no frame is taken any more, the transmit
   /// thread ends), ends delivery (station::stop_receiving), then, the first
-  /// time only and under the lock: `teardown` (join the transmit thread,
+  /// time only and under the lock: `teardown` (with the transmit step stopped,
   /// clear what the station published), station::leave, and drops the
   /// handler. No handler call starts after it returns.
   void stop(station& st, tx_gate& gate, const std::function<void()>& teardown);
