@@ -20,6 +20,16 @@
 
 namespace herm {
 
+namespace {
+
+/// How long a neighbour heard only through its update (no hello yet) is
+/// held for its first hello: a hello interval can be up to 65.5 s, but a
+/// module sends its hello right after such an update or within its
+/// interval.
+constexpr std::chrono::milliseconds first_hello_wait{10'000};
+
+} // namespace
+
 namespace agent_detail {
 
 // -- sending --------------------------------------------------------------------
@@ -505,11 +515,14 @@ void on_update(agent_impl self, channel_id ch, link_addr src,
     // our hello first and told us everything at once. Dropping it would
     // leave us without a route back until its next hello (a hello
     // interval), while it already routes to us. Its interval is unknown
-    // until that hello: ours is assumed meanwhile. An update that was
-    // overtaken by its sender's goodbye (another priority lane) does not
-    // bring it back.
+    // until that hello, and may be longer than ours: it is held for
+    // first_hello_wait meanwhile (with ours, a neighbour with slower
+    // hellos would be lost before its first one, and every binding
+    // through it with it). An update that was overtaken by its sender's
+    // goodbye (another priority lane) does not bring it back.
     if (st.neighbours.departed(nh, u->instance)
-        || !meet(self, nh, u->sender, u->instance, st.cfg.hello_interval,
+        || !meet(self, nh, u->sender, u->instance,
+                 std::max(st.cfg.hello_interval, first_hello_wait),
                  "update")) {
       ++st.stats.rx_unknown_neighbour;
       return;

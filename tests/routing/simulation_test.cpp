@@ -694,6 +694,31 @@ TEST_F(routing_sim, a_goodbye_from_another_instance_is_ignored) {
   EXPECT_EQ(net.stats(0).rx_goodbyes, 0u);
 }
 
+// The joiner's hellos are five times as frequent as its neighbour's. It
+// hears the neighbour's update first, and the neighbour's next hello comes
+// up to 500 ms later: held for the joiner's own interval (150 ms at its
+// hello loss), the neighbour would be lost before that hello and come back
+// with it, and every binding through it with it (seen as proxies ending in
+// board_hermd). So it is held for its first hello.
+TEST_F(routing_sim, a_neighbour_met_by_its_update_is_held_until_its_slower_hello) {
+  sim_network net{*this, test_prefix()}; // hellos every 100 ms
+  auto slow = net.add_module(id_of(0));
+  auto fast = net.add_module(id_of(1));
+  net.at(slow).cfg.hello_interval = 500ms;
+  net.connect({slow, fast}, "ethernet");
+  net.start_module(slow);
+  net.advance(250ms); // slow's first hello went out to nobody
+  net.start_module(fast);
+  net.advance(20ms);
+  ASSERT_TRUE(net.route(fast, id_of(0))) << "met by its update";
+  // Until slow's next hello (at 500 ms) and beyond, the route stays.
+  for (int i = 0; i < 30; ++i) {
+    net.advance(20ms);
+    ASSERT_TRUE(net.route(fast, id_of(0))) << "lost after " << 20 * (i + 2)
+                                           << " ms";
+  }
+}
+
 // An update heard before any hello makes its sender a neighbour, but not
 // once the sender said goodbye in that life: an update it sent before its
 // goodbye and that arrives after it (another priority lane) is dropped as
