@@ -26,7 +26,8 @@
 // the loop thread the step runs within it, from another thread in the
 // loop's next turn. stop() (any thread, idempotent, also from a handler)
 // stops the step, unwatches and cancels on the loop and leaves the bus;
-// no handler call follows its return.
+// no handler call follows its return. Frames sent before start wait for
+// it (they take part in no arbitration until then).
 
 #include "channels/drivers/can_emu.hpp"
 
