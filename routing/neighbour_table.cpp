@@ -50,29 +50,15 @@ bool neighbour_table::goodbye(const next_hop& from, uint64_t instance) {
   if (i == neighbours_.end() || i->second.instance != instance)
     return false;
   erase(i);
-  auto stamp = ++next_departure_;
-  departed_[from] = departure{instance, stamp};
-  departed_order_.emplace_back(from, stamp);
-  auto current = [this](const std::pair<next_hop, uint64_t>& x) {
-    auto d = departed_.find(x.first);
-    return d != departed_.end() && d->second.stamp == x.second;
-  };
-  // Bound: forget the oldest goodbyes (entries superseded by a later
-  // goodbye or a hello are skipped on the way).
-  while (departed_.size() > limits_.total) {
-    if (current(departed_order_.front()))
-      departed_.erase(departed_order_.front().first);
-    departed_order_.pop_front();
+  departed_[from] = departure{instance, ++next_departure_};
+  if (departed_.size() > limits_.total) {
+    // Bound: forget the oldest goodbye. O(n), and only a goodbye of a
+    // neighbour held (its hello came first) gets here.
+    departed_.erase(std::min_element(departed_.begin(), departed_.end(),
+                                     [](const auto& x, const auto& y) {
+                                       return x.second.order < y.second.order;
+                                     }));
   }
-  // The order keeps superseded entries until they reach the front: drop
-  // them all once they are as many as the current ones (amortised O(1)).
-  if (departed_order_.size() > 2 * departed_.size() + 8)
-    departed_order_.erase(std::remove_if(departed_order_.begin(),
-                                         departed_order_.end(),
-                                         [&](const auto& x) {
-                                           return !current(x);
-                                         }),
-                          departed_order_.end());
   return true;
 }
 

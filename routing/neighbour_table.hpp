@@ -14,7 +14,6 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
-#include <deque>
 #include <map>
 #include <optional>
 #include <vector>
@@ -73,7 +72,8 @@ public:
 
   /// A goodbye from `from`: drops it if held with that `instance` (a
   /// goodbye of an earlier life changes nothing) and remembers that it
-  /// left (departed). True if dropped. O(log n).
+  /// left (departed). True if dropped. O(log n); O(n) when it forgets the
+  /// oldest goodbye for the bound.
   bool goodbye(const next_hop& from, uint64_t instance);
 
   /// Whether `from` said goodbye as `instance` and has not said hello since:
@@ -122,13 +122,12 @@ private:
   limits limits_;
   std::map<next_hop, neighbour> neighbours_;
   /// Goodbyes heard (departed): next hop -> the instance that left, and
-  /// the next hops in the order they left (for the bound).
+  /// when, in goodbyes (for the bound).
   struct departure {
     uint64_t instance = 0;
-    uint64_t stamp = 0; // order of the goodbye
+    uint64_t order = 0;
   };
   std::map<next_hop, departure> departed_;
-  std::deque<std::pair<next_hop, uint64_t>> departed_order_; // (hop, stamp)
   uint64_t next_departure_ = 0;
   /// Neighbours per channel (only channels with some).
   std::map<channel_id, size_t> on_channel_;

@@ -480,9 +480,6 @@ void on_hello(agent_impl self, channel_id ch, link_addr src,
   auto h = decode_hello(bytes.data(), bytes.size());
   if (!decoded(self, h))
     return;
-  auto ci = st.channels.find(ch);
-  if (ci == st.channels.end())
-    return;
   auto now = self->clock().now();
   next_hop nh{ch, src};
   if (h->interval_ms == 0) {

@@ -179,6 +179,9 @@ struct routing_stats {
   uint64_t broadcasts_relayed = 0;
   uint64_t dropped_duplicate = 0;
   uint64_t rx_malformed = 0;
+  /// Updates from a link address that is not a neighbour and could not
+  /// become one: past a neighbour bound, or its sender said goodbye in that
+  /// life (routing_agent.cpp, on_update).
   uint64_t rx_unknown_neighbour = 0;
   uint64_t rx_refused_routes = 0;
   /// Neighbours that said goodbye (and were dropped at once).

@@ -159,16 +159,12 @@ public:
 
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    if (auto err = life_.start(station_, std::move(handler), loop,
-                               wire::header_size + CANFD_MTU))
-      return err;
-    pump_.start(loop, [this] { transmit_step(); });
-    return caf::none;
+    return life_.start(station_, std::move(handler), loop,
+                       wire::header_size + CANFD_MTU,
+                       [this] { transmit_step(); });
   }
 
   void stop() override {
-    // First, outside the life cycle's lock: it waits for the loop thread.
-    pump_.stop();
     life_.stop(station_, gate_, [this] {
       if (station_.state() != nullptr) {
         auto& me = bus().slots[cfg_.node];
@@ -201,10 +197,10 @@ public:
       // Published before send() returns: from now on, the frame takes
       // part in every arbitration on the bus. Not before start: nothing
       // would transmit it.
-      if (pump_.started())
+      if (life_.pump().started())
         publish(queue_.front());
     }
-    pump_.kick();
+    life_.pump().kick();
     return caf::none;
   }
 
@@ -373,16 +369,15 @@ private:
   //     (station::retry_stalled); meanwhile no further frame goes out.
   void transmit_step() {
     auto& busy_until = bus().busy_until;
-    if (station_.stalled() && !station_.retry_stalled(now_ns())) {
-      pump_.at(now_ns() + emu_medium::stall_retry_ns);
+    auto& pump = life_.pump();
+    if (pump.held_back(station_))
       return;
-    }
     std::unique_lock<std::mutex> lk{gate_.mutex()};
     for (int sent = 0; !gate_.closed() && !queue_.empty();) {
       if (station_.failed())
         return;
       if (sent == emu_medium::max_frames_per_step) {
-        pump_.at(now_ns()); // the loop's other work first
+        pump.at(now_ns()); // the loop's other work first
         return;
       }
       auto& head = queue_.front();
@@ -390,13 +385,13 @@ private:
       auto now = now_ns();
       auto busy = busy_until.load();
       if (busy > now) {
-        pump_.at(std::min(busy, now + heartbeat_period_ns));
+        pump.at(std::min(busy, now + heartbeat_period_ns));
         return;
       }
       auto arb = arbitrate(head, busy, now);
       if (!arb.wins) {
         ++arbitration_lost_;
-        pump_.at(now + backoff_ns);
+        pump.at(now + backoff_ns);
         return;
       }
       auto start = std::max(arb.point, now - emu_medium::max_credit_ns);
@@ -422,10 +417,8 @@ private:
         ++tx_frames_;
       if (!station_.failed() && !fan_out(f, end, destroyed, buf_))
         return;
-      if (station_.stalled()) {
-        pump_.at(now_ns() + emu_medium::stall_retry_ns);
+      if (pump.held_back(station_))
         return;
-      }
       lk.lock();
     }
     if (gate_.closed())
@@ -506,7 +499,6 @@ private:
   std::atomic<double> error_rate_;
 
   emu_medium::station_life life_;
-  emu_medium::tx_pump pump_;
 
   // Transmit queue (a heap, see `later`) and our slot, guarded by
   // gate_.mutex().

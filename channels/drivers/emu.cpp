@@ -214,16 +214,12 @@ public:
 
   caf::error start(std::shared_ptr<frame_handler> handler,
                    event_loop& loop) override {
-    if (auto err = life_.start(station_, std::move(handler), loop,
-                               emu::wire_header_size + cfg_.profile.mtu))
-      return err;
-    pump_.start(loop, [this] { transmit_step(); });
-    return caf::none;
+    return life_.start(station_, std::move(handler), loop,
+                       emu::wire_header_size + cfg_.profile.mtu,
+                       [this] { transmit_step(); });
   }
 
   void stop() override {
-    // First, outside the life cycle's lock: it waits for the loop thread.
-    pump_.stop();
     life_.stop(station_, gate_, [] {});
   }
 
@@ -252,7 +248,7 @@ public:
       f.enqueued_at = enqueued_at;
       queue_.push_back(std::move(f));
     }
-    pump_.kick();
+    life_.pump().kick();
     return caf::none;
   }
 
@@ -420,15 +416,14 @@ private:
   /// emu_medium::max_frames_per_step frames per call; a receiver whose
   /// queue is full holds the next frame back (station::retry_stalled).
   void transmit_step() {
-    if (station_.stalled() && !station_.retry_stalled(now_ns())) {
-      pump_.at(now_ns() + emu_medium::stall_retry_ns);
+    auto& pump = life_.pump();
+    if (pump.held_back(station_))
       return;
-    }
     auto& slot = medium().busy_until[cfg_.p2p ? station_.number() : 0];
     for (int sent = 0; !station_.failed();) {
       if (in_flight_) {
         if (now_ns() < in_flight_end_) {
-          pump_.at(in_flight_end_);
+          pump.at(in_flight_end_);
           return;
         }
         auto f = std::move(*in_flight_);
@@ -440,12 +435,10 @@ private:
           if (spare_.size() < std::min<uint64_t>(cfg_.queue, 64))
             spare_.push_back(std::move(f.bytes));
         }
-        if (station_.stalled()) {
-          pump_.at(now_ns() + emu_medium::stall_retry_ns);
+        if (pump.held_back(station_))
           return;
-        }
         if (++sent == emu_medium::max_frames_per_step) {
-          pump_.at(now_ns()); // the loop's other work first
+          pump.at(now_ns()); // the loop's other work first
           return;
         }
       }
@@ -570,7 +563,6 @@ private:
   std::atomic<uint64_t> bandwidth_;
 
   emu_medium::station_life life_;
-  emu_medium::tx_pump pump_;
 
   // Transmit queue, guarded by gate_.mutex().
   emu_medium::tx_gate gate_;

@@ -458,6 +458,13 @@ void tx_pump::at(int64_t due_ns) {
   });
 }
 
+bool tx_pump::held_back(station& st) {
+  if (!st.stalled() || st.retry_stalled(now_ns()))
+    return false;
+  at(now_ns() + stall_retry_ns);
+  return true;
+}
+
 void tx_pump::run() {
   running_ = true;
   step_();
@@ -780,7 +787,8 @@ void station::leave() {
 
 caf::error station_life::start(station& st,
                                std::shared_ptr<frame_handler> handler,
-                               event_loop& loop, size_t max_datagram) {
+                               event_loop& loop, size_t max_datagram,
+                               std::function<void()> step) {
   {
     std::lock_guard<std::mutex> guard{mtx_};
     if (!handler)
@@ -800,11 +808,14 @@ caf::error station_life::start(station& st,
     started_ = false;
     return err;
   }
+  pump_.start(loop, std::move(step));
   return caf::none;
 }
 
 void station_life::stop(station& st, tx_gate& gate,
                         const std::function<void()>& teardown) {
+  // Not under mtx_ either: the pump waits for the loop thread.
+  pump_.stop();
   gate.close();
   // Ends delivery first (waits for a callback in progress on another
   // thread), outside mtx_ for the same reason as in start.

@@ -44,7 +44,6 @@
 #include <mutex>
 #include <random>
 #include <string>
-#include <thread>
 #include <utility>
 #include <vector>
 
@@ -324,6 +323,8 @@ private:
 /// Threading: start, kick and stop from any thread; at from the step only.
 /// After stop returns no step runs (a task posted earlier finds the flag;
 /// the timer is cancelled on the loop).
+class station;
+
 class tx_pump {
 public:
   tx_pump() = default;
@@ -345,6 +346,11 @@ public:
   /// From the step: runs it again at `due_ns` (CLOCK_MONOTONIC); the
   /// earliest time asked for wins.
   void at(int64_t due_ns);
+
+  /// From the step: retries `st`'s stalled datagrams (station::retry_stalled)
+  /// and, while some remain, runs the step again in stall_retry_ns. True
+  /// then: the step sends no further frame.
+  bool held_back(station& st);
 
   /// Idempotent. Not from within the step. Must not be called while
   /// holding anything a loop callback waits for (event_loop::run_sync).
@@ -657,8 +663,9 @@ private:
 
 /// The start/stop life cycle both emulated drivers (emu, the emulated CAN
 /// bus) share: opened, then started (receiving on the module's event loop),
-/// then stopped for good. It owns the lock, the state and the frame
-/// handler; the driver owns the station, the transmit gate and thread.
+/// then stopped for good. It owns the lock, the state, the frame handler
+/// and the transmit step's pump; the driver owns the station and the
+/// transmit gate.
 ///
 /// Errors agree with the descriptor drivers (loop_watch.hpp): a null handler
 /// is ec::invalid_parameter ("start needs a frame handler"), a second start
@@ -673,22 +680,31 @@ private:
 /// gone by then.
 ///
 /// Threading: start and stop from any thread, stop also from a handler
-/// call; neither holds the lock while station::start_receiving or
-/// stop_receiving wait for the loop thread (whose handlers may call stop).
+/// call; neither holds the lock while station::start_receiving,
+/// stop_receiving or the pump wait for the loop thread (whose handlers may
+/// call stop).
 class station_life {
 public:
-  /// Refuses as above, then keeps `handler` and starts receiving on `loop`
-  /// datagrams of up to `max_datagram` bytes. If start_receiving fails its
+  /// Refuses as above, then keeps `handler`, starts receiving on `loop`
+  /// datagrams of up to `max_datagram` bytes and runs `step` (the driver's
+  /// transmit step) on `loop` through pump(). If start_receiving fails its
   /// error is returned and the handler dropped.
   caf::error start(station& st, std::shared_ptr<frame_handler> handler,
-                   event_loop& loop, size_t max_datagram);
+                   event_loop& loop, size_t max_datagram,
+                   std::function<void()> step);
 
-  /// Idempotent. Closes `gate` (no frame is taken any more, the transmit
-  /// thread ends), ends delivery (station::stop_receiving), then, the first
-  /// time only and under the lock: `teardown` (with the transmit step stopped,
-  /// clear what the station published), station::leave, and drops the
-  /// handler. No handler call starts after it returns.
+  /// Idempotent. Stops the transmit step, closes `gate` (no frame is taken
+  /// any more), ends delivery (station::stop_receiving), then, the first
+  /// time only and under the lock: `teardown` (clear what the station
+  /// published), station::leave, and drops the handler. No handler call
+  /// and no step starts after it returns.
   void stop(station& st, tx_gate& gate, const std::function<void()>& teardown);
+
+  /// What runs the driver's transmit step (kick from send(), at and
+  /// held_back from the step).
+  tx_pump& pump() {
+    return pump_;
+  }
 
   /// The handler while started; null before and after. Loop thread (client
   /// callbacks): keep the copy while calling it.
@@ -703,6 +719,7 @@ private:
   /// Written under mtx_ before receiving starts and after it ended; read
   /// by the loop thread in between only.
   std::shared_ptr<frame_handler> handler_;
+  tx_pump pump_;
 };
 
 } // namespace herm::emu_medium
